@@ -1,0 +1,125 @@
+#pragma once
+// Readers and writers for the formats surveys come in. Every reader throws InputError naming the
+// file and the line (text) or byte offset (binary) on truncated, malformed, non-finite, empty or
+// absurdly sized input; every writer writes atomically (temp file + rename, core/atomic_file.hpp).
+//
+// Units: minemap holds lengths in cm. Each reader takes the file's unit (ReadSettings::unit, with a
+// per-format default: cm for 3DTK uos, m for PCD, PLY and KITTI) and converts on load; each writer
+// takes the unit to write in.
+#include <Eigen/Core>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "minemap/core/pose.hpp"
+#include "minemap/core/scan.hpp"
+#include "minemap/core/units.hpp"
+
+namespace minemap::io {
+
+namespace fs = std::filesystem;
+
+/// How to interpret a file's coordinates.
+struct ReadSettings {
+  std::optional<LengthUnit> unit;  ///< the file's unit; nullopt = the format's default
+  /// Convert from a right-handed frame (x forward, y left, z up) into 3DTK's left-handed one
+  /// (x right, y up, z forward) as 3DTK's ScanDataTransform_xyz does.
+  bool right_handed_to_3dtk = false;
+  /// uos files without "# slice" markers: split into slices of this many points (0 = no slices).
+  std::uint32_t points_per_slice = 0;
+  /// Refuse files that claim more points than this (absurd headers must not allocate).
+  std::uint64_t max_points = 50'000'000;
+};
+
+// ---- 3DTK uos: scanNNN.3d, scanNNN.pose, scanNNN.frames --------------------------------------
+
+/// Reads a `.3d` file: lines "x y z" (or "x y z r", reflectance ignored), '#' comments, up to 10
+/// unparsable header lines before the first point (as 3DTK). minemap writes a "# slice N" comment
+/// before each slice; when present they restore the slice structure. The pose is NOT read here.
+Scan read_uos_points(const fs::path& path, const ReadSettings& settings = {});
+
+/// Writes `scan`'s points (file frame, `unit`) as a `.3d` file with "# slice N" markers.
+void write_uos_points(const fs::path& path, const Scan& scan, LengthUnit unit = LengthUnit::kCentimetre);
+
+/// Reads a `.pose` file (x y z in the file's unit, theta_x theta_y theta_z in degrees).
+EulerPose read_uos_pose(const fs::path& path, LengthUnit unit = LengthUnit::kCentimetre);
+void write_uos_pose(const fs::path& path, const Pose& pose_cm, LengthUnit unit = LengthUnit::kCentimetre);
+
+/// A `.frames` line: the column-major 4x4 transform and 3DTK's algorithm type
+/// (0 INVALID, 1 ICP, 2 ICPINACTIVE, 3 LUM, 4 ELCH).
+struct FrameLine {
+  Pose pose_cm = Pose::Identity();
+  int type = 1;
+};
+std::vector<FrameLine> read_uos_frames(const fs::path& path, LengthUnit unit = LengthUnit::kCentimetre);
+void write_uos_frames(const fs::path& path, std::span<const FrameLine> frames, LengthUnit unit = LengthUnit::kCentimetre);
+
+// ---- PCD v0.7 (ascii, binary, binary_compressed with LZF, column-wise) ------------------------
+
+enum class PcdEncoding { kAscii, kBinary, kBinaryCompressed };
+Scan read_pcd(const fs::path& path, const ReadSettings& settings = {});
+void write_pcd(const fs::path& path, const Scan& scan, PcdEncoding encoding, LengthUnit unit = LengthUnit::kMetre);
+
+// ---- PLY (ascii, binary_little_endian), vertices x y z --------------------------------------------
+
+Scan read_ply(const fs::path& path, const ReadSettings& settings = {});
+/// Writes world-frame points given in cm (e.g. a merged map) as PLY in `unit`.
+void write_ply(const fs::path& path, std::span<const Eigen::Vector3f> points_cm, bool binary = true,
+               LengthUnit unit = LengthUnit::kMetre);
+
+// ---- KITTI velodyne .bin (float32 x y z [intensity]) ---------------------------------------------
+
+/// `floats_per_point` is 4 for KITTI's raw files (x y z intensity), 3 for xyz-only dumps.
+Scan read_kitti_bin(const fs::path& path, const ReadSettings& settings = {}, int floats_per_point = 4);
+void write_kitti_bin(const fs::path& path, const Scan& scan, int floats_per_point = 4, LengthUnit unit = LengthUnit::kMetre);
+
+// ---- trajectory files ------------------------------------------------------------------------------
+
+/// Text file of 4x4 matrices (16 numbers each, row-major, blank lines allowed between them).
+std::vector<Pose> read_matrix_poses(const fs::path& path, LengthUnit unit = LengthUnit::kMetre);
+void write_matrix_poses(const fs::path& path, std::span<const Pose> poses_cm, LengthUnit unit = LengthUnit::kMetre);
+
+/// TUM: "timestamp tx ty tz qx qy qz qw" per line, '#' comments.
+struct TimedPose {
+  double timestamp_s = 0.0;
+  Pose pose_cm = Pose::Identity();
+};
+std::vector<TimedPose> read_tum(const fs::path& path, LengthUnit unit = LengthUnit::kMetre);
+void write_tum(const fs::path& path, std::span<const TimedPose> poses, LengthUnit unit = LengthUnit::kMetre);
+
+/// KITTI poses: 12 numbers per line (3x4 row-major).
+std::vector<Pose> read_kitti_poses(const fs::path& path, LengthUnit unit = LengthUnit::kMetre);
+void write_kitti_poses(const fs::path& path, std::span<const Pose> poses_cm, LengthUnit unit = LengthUnit::kMetre);
+
+/// gtsam_points-style graph: "vK x y z qx qy qz qw" per line (T_world_lidar). Returns by K.
+std::vector<Pose> read_graph_poses(const fs::path& path, LengthUnit unit = LengthUnit::kMetre);
+
+// ---- surveys: a folder of scans ----------------------------------------------------------------------
+
+struct SurveyReadSettings {
+  ReadSettings read;
+  std::optional<fs::path> initial_poses;  ///< TUM, KITTI, 4x4 or graph file; else per-format default
+};
+
+/// A survey loaded from a folder.
+struct Survey {
+  std::string format;  ///< "uos", "pcd", "ply", "kitti"
+  LengthUnit unit = LengthUnit::kCentimetre;  ///< the unit the files were read in (outputs use it)
+  std::vector<Scan> scans;                    ///< ordered by name; pose_cm = initial guess
+  std::optional<std::vector<Pose>> truth_cm;  ///< reference T_world_file per scan, where present
+};
+
+/// Detects the format and reads every scan. Layouts:
+///  - uos: scanNNN.3d (+ scanNNN.pose; missing pose = error), optional truth/scanNNN.pose
+///  - pcd / ply: *.pcd / *.ply sorted by name; initial poses from `initial_poses` or identity
+///  - kitti: NNNNNN.bin, or NNNNNN/points.bin (xyz only) with graph.txt as reference poses
+Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings = {});
+
+/// Writes a survey in uos layout (scanNNN.3d + .pose), and truth/ when given.
+void write_uos_survey(const fs::path& dir, std::span<const Scan> scans,
+                      const std::optional<std::vector<Pose>>& truth_cm = std::nullopt);
+
+}  // namespace minemap::io

@@ -1,0 +1,39 @@
+#pragma once
+// Helpers shared by the unit tests: paths to shared data, temp folders, seeded random clouds.
+#include <Eigen/Core>
+#include <cstdint>
+#include <filesystem>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace minemap::test {
+
+/// ../shared/data beside the checkout (MINEMAP_SHARED_DATA_DIR at configure time).
+std::filesystem::path shared_data_dir();
+
+/// A fresh, empty folder under the system temp dir, removed by the destructor.
+class TempDir {
+ public:
+  explicit TempDir(const std::string& tag = "minemap-test");
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+/// Writes `content` to `path` (test inputs; not atomic).
+void write_text(const std::filesystem::path& path, const std::string& content);
+std::string read_text(const std::filesystem::path& path);
+
+/// `count` points uniform in the box [lo, hi]^3, fixed seed.
+std::vector<Eigen::Vector3f> random_cloud(std::size_t count, float lo, float hi, std::uint32_t seed);
+
+/// Runs the minemap program with `args`; returns its exit code, stdout+stderr in `output`.
+int run_cli(const std::string& args, std::string* output = nullptr);
+
+}  // namespace minemap::test
