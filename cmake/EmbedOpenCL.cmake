@@ -8,9 +8,10 @@ function(minemap_embed_opencl)
   foreach(src ${ARG_SOURCES})
     list(APPEND abs_sources ${CMAKE_CURRENT_SOURCE_DIR}/${src})
   endforeach()
-  string(REPLACE ";" "|" joined "${abs_sources}")
+  string(REPLACE ";" "::" joined "${abs_sources}")
   add_custom_command(OUTPUT ${ARG_OUTPUT}
     COMMAND ${CMAKE_COMMAND} -DOUT=${ARG_OUTPUT} "-DINPUTS=${joined}" -P ${MINEMAP_EMBED_SCRIPT}
+    VERBATIM
     DEPENDS ${abs_sources} ${MINEMAP_EMBED_SCRIPT}
     COMMENT "Embedding OpenCL kernels into ${ARG_OUTPUT}")
 endfunction()

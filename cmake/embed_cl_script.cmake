@@ -1,6 +1,6 @@
-# Called by minemap_embed_opencl: concatenates INPUTS ('|'-separated) into OUT as a C++ header with
+# Called by minemap_embed_opencl: concatenates INPUTS ("::"-separated) into OUT as a C++ header with
 # an array of raw-string chunks (each under 12 000 characters, below MSVC's string-literal limit).
-string(REPLACE "|" ";" inputs "${INPUTS}")
+string(REPLACE "::" ";" inputs "${INPUTS}")
 set(content "")
 foreach(in ${inputs})
   file(READ "${in}" piece)

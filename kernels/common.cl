@@ -1,0 +1,19 @@
+// Shared by all minemap kernels. OpenCL C 1.2, float only (no double anywhere, literals included),
+// no atomics on floats. Contraction is off so that a*b + c rounds exactly as the C++ reference
+// (built without FMA contraction) does: CPU and device then agree bit for bit on distances.
+#pragma OPENCL FP_CONTRACT OFF
+
+// A rigid transform as three rows (xyz = rotation row, w = translation), applied left to right in
+// the same order as minemap::detail::RigidF::apply.
+inline float3 mm_apply_rigid(float4 row0, float4 row1, float4 row2, float3 p) {
+  return (float3)(((row0.x * p.x + row0.y * p.y) + row0.z * p.z) + row0.w,
+                  ((row1.x * p.x + row1.y * p.y) + row1.z * p.z) + row1.w,
+                  ((row2.x * p.x + row2.y * p.y) + row2.z * p.z) + row2.w);
+}
+
+inline float mm_squared_distance(float3 a, float3 b) {
+  const float dx = a.x - b.x;
+  const float dy = a.y - b.y;
+  const float dz = a.z - b.z;
+  return (dx * dx + dy * dy) + dz * dz;
+}

@@ -1,0 +1,218 @@
+// Closest-point search on the flat bucket kd-tree (paper, section IV.D) and the ICP sums.
+// Mirrors src/minemap/search/pairing_math.hpp: same traversal order, same strict '<' ties.
+//
+// Tree layout (uploaded unchanged from minemap::KdTree):
+//   nodes  int4 {axis (-1 = leaf), a, b, split bits}; inner: a/b = children; leaf: a = first point,
+//          b = count, split bits = leaf index
+//   points float4 {x, y, z, original index bits}
+//   means  float4 {x, y, z, count} per leaf
+
+#ifndef MM_STACK_DEPTH
+#define MM_STACK_DEPTH 64
+#endif
+
+#define MM_EXACT 0
+#define MM_APPROXIMATE 1
+#define MM_BRUTE_FORCE 2
+
+inline float mm_squared_distance_to_box(float3 q, float4 lo, float4 hi) {
+  const float3 below = fmax(lo.xyz - q, (float3)(0.0f));
+  const float3 above = fmax(q - hi.xyz, (float3)(0.0f));
+  const float3 d = below + above;
+  return (d.x * d.x + d.y * d.y) + d.z * d.z;
+}
+
+// One query against one model: updates best (squared distance bound) and the hit, returns 1 when
+// a closer model point was found. `hit_position` is in the MODEL frame.
+inline int mm_search_model(float3 q, __global const int4* nodes, __global const float4* tree_points,
+                           __global const float4* leaf_means, const int method, float* best, int* hit_index,
+                           float3* hit_position) {
+  int found = 0;
+  if (method == MM_APPROXIMATE) {
+    int node = 0;
+    int4 n = nodes[0];
+    while (n.x >= 0) {
+      const float split = as_float(n.w);
+      node = ((n.x == 0 ? q.x : (n.x == 1 ? q.y : q.z)) < split) ? n.y : n.z;
+      n = nodes[node];
+    }
+    const float4 mean = leaf_means[n.w];
+    const float d = mm_squared_distance(q, mean.xyz);
+    if (d < *best) {
+      *best = d;
+      *hit_index = -1;
+      *hit_position = mean.xyz;
+      found = 1;
+    }
+    return found;
+  }
+  if (method == MM_BRUTE_FORCE) {
+    // Unreachable from the tree search path: brute force has its own tiled kernel below.
+    return 0;
+  }
+  int stack_node[MM_STACK_DEPTH];
+  float stack_plane[MM_STACK_DEPTH];
+  int top = 0;
+  int node = 0;
+  for (;;) {
+    int4 n = nodes[node];
+    while (n.x >= 0) {
+      const float diff = (n.x == 0 ? q.x : (n.x == 1 ? q.y : q.z)) - as_float(n.w);
+      const int near_child = diff < 0.0f ? n.y : n.z;
+      const int far_child = diff < 0.0f ? n.z : n.y;
+      const float plane = diff * diff;
+      if (plane < *best) {
+        stack_node[top] = far_child;
+        stack_plane[top] = plane;
+        ++top;
+      }
+      node = near_child;
+      n = nodes[node];
+    }
+    for (int i = n.y, end = n.y + n.z; i < end; ++i) {
+      const float4 p = tree_points[i];
+      const float d = mm_squared_distance(p.xyz, q);
+      if (d < *best) {
+        *best = d;
+        *hit_index = as_int(p.w);
+        *hit_position = p.xyz;
+        found = 1;
+      }
+    }
+    for (;;) {
+      if (top == 0) return found;
+      --top;
+      if (stack_plane[top] < *best) break;
+    }
+    node = stack_node[top];
+  }
+}
+
+// One work-item per data point. Keeps, across launches for several models (the union of a scan's
+// neighbours), the closest pair so far: best_pair.xyz = model point in the DATA frame,
+// best_pair.w = squared distance or -1; best_ref = (model id, original point index or -1).
+__kernel void nearest_in_tree(__global const float4* data, const int data_count, __global const int4* nodes,
+                              __global const float4* tree_points, __global const float4* leaf_means,
+                              const float4 box_lo, const float4 box_hi, const float4 to_model0,
+                              const float4 to_model1, const float4 to_model2, const float4 to_data0,
+                              const float4 to_data1, const float4 to_data2, const int method,
+                              const float max_squared_distance, const int model_id, const int first_model,
+                              __global float4* best_pair, __global int2* best_ref) {
+  const int i = get_global_id(0);
+  if (i >= data_count) return;
+  float best = max_squared_distance;
+  if (!first_model) {
+    const float previous = best_pair[i].w;
+    if (previous >= 0.0f) best = previous;
+  } else {
+    best_pair[i] = (float4)(0.0f, 0.0f, 0.0f, -1.0f);
+    best_ref[i] = (int2)(-1, -1);
+  }
+  const float3 q = mm_apply_rigid(to_model0, to_model1, to_model2, data[i].xyz);
+  if (!(mm_squared_distance_to_box(q, box_lo, box_hi) < best)) return;
+  int hit_index = -1;
+  float3 hit = (float3)(0.0f);
+  if (mm_search_model(q, nodes, tree_points, leaf_means, method, &best, &hit_index, &hit)) {
+    best_pair[i] = (float4)(mm_apply_rigid(to_data0, to_data1, to_data2, hit), best);
+    best_ref[i] = (int2)(model_id, hit_index);
+  }
+}
+
+#ifndef MM_BRUTE_TILE
+#define MM_BRUTE_TILE 256
+#endif
+
+// Brute force (Table I's baseline): every model point, tiled through local memory. The work-group
+// size must equal MM_BRUTE_TILE. Visits points in tree order, as the CPU oracle does.
+__kernel void nearest_brute_force(__global const float4* data, const int data_count,
+                                  __global const float4* tree_points, const int tree_count, const float4 box_lo,
+                                  const float4 box_hi, const float4 to_model0, const float4 to_model1,
+                                  const float4 to_model2, const float4 to_data0, const float4 to_data1,
+                                  const float4 to_data2, const float max_squared_distance, const int model_id,
+                                  const int first_model, __global float4* best_pair, __global int2* best_ref) {
+  __local float4 tile[MM_BRUTE_TILE];
+  const int i = get_global_id(0);
+  const int lid = get_local_id(0);
+  const int active = i < data_count;
+  float best = max_squared_distance;
+  float3 q = (float3)(0.0f);
+  if (active) {
+    if (!first_model) {
+      const float previous = best_pair[i].w;
+      if (previous >= 0.0f) best = previous;
+    } else {
+      best_pair[i] = (float4)(0.0f, 0.0f, 0.0f, -1.0f);
+      best_ref[i] = (int2)(-1, -1);
+    }
+    q = mm_apply_rigid(to_model0, to_model1, to_model2, data[i].xyz);
+  }
+  int hit_index = -1;
+  float3 hit = (float3)(0.0f);
+  for (int base = 0; base < tree_count; base += MM_BRUTE_TILE) {
+    const int j = base + lid;
+    tile[lid] = j < tree_count ? tree_points[j] : (float4)(0.0f);
+    barrier(CLK_LOCAL_MEM_FENCE);
+    const int limit = min(MM_BRUTE_TILE, tree_count - base);
+    for (int t = 0; t < limit; ++t) {
+      const float d = mm_squared_distance(tile[t].xyz, q);
+      if (d < best) {
+        best = d;
+        hit_index = as_int(tile[t].w);
+        hit = tile[t].xyz;
+      }
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+  }
+  if (active && hit_index >= 0) {
+    best_pair[i] = (float4)(mm_apply_rigid(to_data0, to_data1, to_data2, hit), best);
+    best_ref[i] = (int2)(model_id, hit_index);
+  }
+}
+
+#define MM_SUM_TERMS 17
+
+// The ICP sums over all pairs, centred on `reference` (data frame): count, sum p', sum m',
+// sum p' m'^T (row-major), sum |p - m|^2. Each work-item strides over the pairs; a tree reduction in
+// local memory (work-group size a power of two) leaves one record of 17 floats per group. The host
+// adds the group records in double in group order: no atomics, the same bits every run.
+__kernel void pair_sums(__global const float4* data, __global const float4* best_pair, const int data_count,
+                        const float4 reference, __global float* partials, __local float* scratch) {
+  const int lid = get_local_id(0);
+  const int wg = get_local_size(0);
+  float acc[MM_SUM_TERMS];
+  for (int t = 0; t < MM_SUM_TERMS; ++t) acc[t] = 0.0f;
+  for (int i = get_global_id(0); i < data_count; i += get_global_size(0)) {
+    const float4 pair = best_pair[i];
+    if (pair.w < 0.0f) continue;
+    const float3 p = data[i].xyz - reference.xyz;
+    const float3 m = pair.xyz - reference.xyz;
+    acc[0] += 1.0f;
+    acc[1] += p.x;
+    acc[2] += p.y;
+    acc[3] += p.z;
+    acc[4] += m.x;
+    acc[5] += m.y;
+    acc[6] += m.z;
+    acc[7] += p.x * m.x;
+    acc[8] += p.x * m.y;
+    acc[9] += p.x * m.z;
+    acc[10] += p.y * m.x;
+    acc[11] += p.y * m.y;
+    acc[12] += p.y * m.z;
+    acc[13] += p.z * m.x;
+    acc[14] += p.z * m.y;
+    acc[15] += p.z * m.z;
+    acc[16] += pair.w;
+  }
+  for (int t = 0; t < MM_SUM_TERMS; ++t) scratch[t * wg + lid] = acc[t];
+  barrier(CLK_LOCAL_MEM_FENCE);
+  for (int stride = wg / 2; stride > 0; stride /= 2) {
+    if (lid < stride) {
+      for (int t = 0; t < MM_SUM_TERMS; ++t) scratch[t * wg + lid] += scratch[t * wg + lid + stride];
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+  }
+  if (lid == 0) {
+    for (int t = 0; t < MM_SUM_TERMS; ++t) partials[get_group_id(0) * MM_SUM_TERMS + t] = scratch[t * wg];
+  }
+}

@@ -5,11 +5,15 @@ namespace {
 std::string format_location(const FileLocation& where, const std::string& message) {
   std::string text = where.path;
   if (where.line > 0) {
-    text += ":" + std::to_string(where.line);
+    text += ':';
+    text += std::to_string(where.line);
   } else if (where.byte_offset >= 0) {
-    text += "@byte " + std::to_string(where.byte_offset);
+    text += "@byte ";
+    text += std::to_string(where.byte_offset);
   }
-  return text + ": " + message;
+  text += ": ";
+  text += message;
+  return text;
 }
 }  // namespace
 

@@ -1,0 +1,254 @@
+// The OpenCL pairing backend: trees and clouds are uploaded once when prepared; each ICP iteration
+// launches one search kernel per model (the union of neighbours keeps the closest pair across
+// launches) and one reduction kernel, then reads back 64 x 17 floats of partial sums, which the host
+// adds in double in group order (deterministic, no float atomics).
+#include <array>
+#include <vector>
+
+#include "minemap/opencl/opencl_backend.hpp"
+#include "minemap/opencl/runtime.hpp"
+
+namespace minemap::opencl {
+namespace {
+
+constexpr std::size_t kSumTerms = 17;
+constexpr std::size_t kReductionGroups = 64;
+constexpr std::size_t kReductionGroupSize = 128;
+constexpr std::size_t kSearchGroupSize = 64;
+constexpr std::size_t kBruteTile = 256;  // must equal MM_BRUTE_TILE in correspondence.cl
+
+cl_float4 to_float4(float x, float y, float z, float w) { return cl_float4{{x, y, z, w}}; }
+
+/// Rows of a rigid transform (rotation row in xyz, translation in w), cast to float as the CPU does.
+std::array<cl_float4, 3> rows_of(const Pose& pose) {
+  std::array<cl_float4, 3> rows{};
+  for (int r = 0; r < 3; ++r) {
+    rows[r] = to_float4(static_cast<float>(pose(r, 0)), static_cast<float>(pose(r, 1)), static_cast<float>(pose(r, 2)),
+                        static_cast<float>(pose(r, 3)));
+  }
+  return rows;
+}
+
+template <typename T>
+cl::Buffer upload(cl::Context& context, const std::vector<T>& host) {
+  // Zero-sized buffers are invalid in OpenCL: keep one dummy element for empty clouds.
+  const std::size_t bytes = std::max<std::size_t>(1, host.size()) * sizeof(T);
+  if (host.empty()) {
+    std::vector<T> dummy(1);
+    return cl::Buffer(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, dummy.data());
+  }
+  return cl::Buffer(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, const_cast<T*>(host.data()));
+}
+
+class OpenClPreparedCloud final : public PreparedCloud {
+ public:
+  OpenClPreparedCloud(Runtime& runtime, std::vector<Eigen::Vector3f> points, const KdTreeSettings& settings)
+      : PreparedCloud(std::move(points), settings) {
+    auto& context = runtime.context();
+    std::vector<cl_float4> data;
+    data.reserve(this->points().size());
+    for (const auto& p : this->points()) data.push_back(to_float4(p.x(), p.y(), p.z(), 0.0f));
+    const std::size_t bytes_needed = data.size() * (sizeof(cl_float4) * 3 + sizeof(cl_int2));
+    if (bytes_needed > runtime.max_alloc_bytes()) {
+      throw DeviceError("cloud of " + std::to_string(data.size()) + " points exceeds the device's allocation limit");
+    }
+    data_ = upload(context, data);
+    const auto& t = tree();
+    nodes_ = upload(context, std::vector<KdNode>(t.nodes().begin(), t.nodes().end()));
+    tree_points_ = upload(context, std::vector<KdPoint>(t.points().begin(), t.points().end()));
+    leaf_means_ = upload(context, std::vector<std::array<float, 4>>(t.leaf_means().begin(), t.leaf_means().end()));
+    const std::size_t n = std::max<std::size_t>(1, data.size());
+    best_pair_ = cl::Buffer(context, CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+    best_ref_ = cl::Buffer(context, CL_MEM_READ_WRITE, n * sizeof(cl_int2));
+  }
+
+  cl::Buffer data_, nodes_, tree_points_, leaf_means_, best_pair_, best_ref_;
+};
+
+class OpenClPairingBackend final : public PairingBackend {
+ public:
+  explicit OpenClPairingBackend(std::shared_ptr<Runtime> runtime) : runtime_(std::move(runtime)) {
+    try {
+      nearest_in_tree_ = cl::Kernel(runtime_->program(), "nearest_in_tree");
+      nearest_brute_force_ = cl::Kernel(runtime_->program(), "nearest_brute_force");
+      pair_sums_ = cl::Kernel(runtime_->program(), "pair_sums");
+      reduction_group_size_ = runtime_->work_group_size(pair_sums_, kReductionGroupSize);
+      if (runtime_->work_group_size(nearest_brute_force_, kBruteTile) < kBruteTile) {
+        throw DeviceError("device work-group limit is below the brute-force tile of " + std::to_string(kBruteTile));
+      }
+      partials_ = cl::Buffer(runtime_->context(), CL_MEM_WRITE_ONLY, kReductionGroups * kSumTerms * sizeof(float));
+    } catch (const DeviceError&) {
+      throw;
+    } catch (...) {
+      rethrow_as_device_error("creating the OpenCL pairing kernels");
+    }
+  }
+
+  std::string name() const override { return "opencl"; }
+  std::string device_description() const override { return runtime_->description(); }
+
+  std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points_cm,
+                                               const KdTreeSettings& tree_settings) override {
+    try {
+      return std::make_shared<OpenClPreparedCloud>(*runtime_, std::move(points_cm), tree_settings);
+    } catch (const DeviceError&) {
+      throw;
+    } catch (...) {
+      rethrow_as_device_error("uploading a cloud to the OpenCL device");
+    }
+  }
+
+  PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
+                        const PairingSettings& settings) override {
+    PairSums total;
+    total.reference_cm = data.centroid_cm();
+    const auto& cloud = as_device(data);
+    const auto n = static_cast<cl_int>(data.points().size());
+    try {
+      if (n == 0 || !search(cloud, n, models, method, settings)) return total;
+      // The centroid is float-representable (PreparedCloud rounds it), so the device subtracts
+      // exactly the reference the host adds back in t = (c_m + r) - R (c_p + r).
+      const Eigen::Vector3f r = data.centroid_cm().cast<float>();
+      const cl_float4 reference = to_float4(r.x(), r.y(), r.z(), 0.0f);
+      int arg = 0;
+      pair_sums_.setArg(arg++, cloud.data_);
+      pair_sums_.setArg(arg++, cloud.best_pair_);
+      pair_sums_.setArg(arg++, n);
+      pair_sums_.setArg(arg++, reference);
+      pair_sums_.setArg(arg++, partials_);
+      pair_sums_.setArg(arg++, cl::Local(kSumTerms * reduction_group_size_ * sizeof(float)));
+      runtime_->queue().enqueueNDRangeKernel(pair_sums_, cl::NullRange,
+                                             cl::NDRange(kReductionGroups * reduction_group_size_),
+                                             cl::NDRange(reduction_group_size_));
+      std::array<float, kReductionGroups * kSumTerms> partial{};
+      runtime_->queue().enqueueReadBuffer(partials_, CL_TRUE, 0, sizeof(partial), partial.data());
+      for (std::size_t g = 0; g < kReductionGroups; ++g) {
+        const float* s = partial.data() + g * kSumTerms;
+        total.count += s[0];
+        total.sum_data += Eigen::Vector3d(s[1], s[2], s[3]);
+        total.sum_model += Eigen::Vector3d(s[4], s[5], s[6]);
+        Eigen::Matrix3d outer;
+        outer << s[7], s[8], s[9], s[10], s[11], s[12], s[13], s[14], s[15];
+        total.sum_data_model += outer;
+        total.sum_squared_distance_cm2 += s[16];
+      }
+    } catch (const DeviceError&) {
+      throw;
+    } catch (...) {
+      rethrow_as_device_error("OpenCL pairing");
+    }
+    return total;
+  }
+
+  std::vector<NearestPair> nearest(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
+                                   const PairingSettings& settings) override {
+    const auto& cloud = as_device(data);
+    const auto n = static_cast<cl_int>(data.points().size());
+    std::vector<NearestPair> result(static_cast<std::size_t>(n));
+    try {
+      if (n == 0 || !search(cloud, n, models, method, settings)) return result;
+      std::vector<cl_float4> pairs(static_cast<std::size_t>(n));
+      std::vector<cl_int2> refs(static_cast<std::size_t>(n));
+      runtime_->queue().enqueueReadBuffer(cloud.best_pair_, CL_TRUE, 0, pairs.size() * sizeof(cl_float4), pairs.data());
+      runtime_->queue().enqueueReadBuffer(cloud.best_ref_, CL_TRUE, 0, refs.size() * sizeof(cl_int2), refs.data());
+      for (std::size_t i = 0; i < result.size(); ++i) {
+        if (pairs[i].s[3] < 0.0f) continue;
+        result[i] = {pairs[i].s[3], refs[i].s[0], refs[i].s[1], Eigen::Vector3f(pairs[i].s[0], pairs[i].s[1], pairs[i].s[2])};
+      }
+    } catch (const DeviceError&) {
+      throw;
+    } catch (...) {
+      rethrow_as_device_error("OpenCL nearest-neighbour search");
+    }
+    return result;
+  }
+
+ private:
+  static const OpenClPreparedCloud& as_device(const PreparedCloud& cloud) {
+    const auto* device_cloud = dynamic_cast<const OpenClPreparedCloud*>(&cloud);
+    if (!device_cloud) throw std::invalid_argument("cloud was not prepared by the OpenCL backend");
+    return *device_cloud;
+  }
+
+  /// Launches the search for every model; false when no model could pair anything (all empty).
+  bool search(const OpenClPreparedCloud& cloud, cl_int n, std::span<const ModelPlacement> models, SearchMethod method,
+              const PairingSettings& settings) {
+    const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
+    bool first = true;
+    for (std::size_t k = 0; k < models.size(); ++k) {
+      const auto& model = as_device(*models[k].model);
+      const auto& tree = model.tree();
+      if (tree.empty()) continue;
+      const auto to_model = rows_of(models[k].model_from_data);
+      const auto to_data = rows_of(rigid_inverse(models[k].model_from_data));
+      const cl_float4 lo = to_float4(tree.bounds_min().x(), tree.bounds_min().y(), tree.bounds_min().z(), 0.0f);
+      const cl_float4 hi = to_float4(tree.bounds_max().x(), tree.bounds_max().y(), tree.bounds_max().z(), 0.0f);
+      const cl_int model_id = static_cast<cl_int>(k);
+      const cl_int first_model = first ? 1 : 0;
+      if (method == SearchMethod::kBruteForce) {
+        cl::Kernel& kernel = nearest_brute_force_;
+        int arg = 0;
+        kernel.setArg(arg++, cloud.data_);
+        kernel.setArg(arg++, n);
+        kernel.setArg(arg++, model.tree_points_);
+        kernel.setArg(arg++, static_cast<cl_int>(tree.size()));
+        kernel.setArg(arg++, lo);
+        kernel.setArg(arg++, hi);
+        for (const auto& row : to_model) kernel.setArg(arg++, row);
+        for (const auto& row : to_data) kernel.setArg(arg++, row);
+        kernel.setArg(arg++, max_squared);
+        kernel.setArg(arg++, model_id);
+        kernel.setArg(arg++, first_model);
+        kernel.setArg(arg++, cloud.best_pair_);
+        kernel.setArg(arg++, cloud.best_ref_);
+        runtime_->queue().enqueueNDRangeKernel(kernel, cl::NullRange,
+                                               cl::NDRange(round_up(static_cast<std::size_t>(n), kBruteTile)),
+                                               cl::NDRange(kBruteTile));
+      } else {
+        cl::Kernel& kernel = nearest_in_tree_;
+        int arg = 0;
+        kernel.setArg(arg++, cloud.data_);
+        kernel.setArg(arg++, n);
+        kernel.setArg(arg++, model.nodes_);
+        kernel.setArg(arg++, model.tree_points_);
+        kernel.setArg(arg++, model.leaf_means_);
+        kernel.setArg(arg++, lo);
+        kernel.setArg(arg++, hi);
+        for (const auto& row : to_model) kernel.setArg(arg++, row);
+        for (const auto& row : to_data) kernel.setArg(arg++, row);
+        kernel.setArg(arg++, static_cast<cl_int>(method == SearchMethod::kApproximate ? 1 : 0));
+        kernel.setArg(arg++, max_squared);
+        kernel.setArg(arg++, model_id);
+        kernel.setArg(arg++, first_model);
+        kernel.setArg(arg++, cloud.best_pair_);
+        kernel.setArg(arg++, cloud.best_ref_);
+        const std::size_t group = runtime_->work_group_size(kernel, kSearchGroupSize);
+        runtime_->queue().enqueueNDRangeKernel(kernel, cl::NullRange,
+                                               cl::NDRange(round_up(static_cast<std::size_t>(n), group)),
+                                               cl::NDRange(group));
+      }
+      first = false;
+    }
+    return !first;
+  }
+
+  std::shared_ptr<Runtime> runtime_;
+  cl::Kernel nearest_in_tree_, nearest_brute_force_, pair_sums_;
+  std::size_t reduction_group_size_ = kReductionGroupSize;
+  cl::Buffer partials_;
+};
+
+}  // namespace
+
+std::unique_ptr<PairingBackend> make_opencl_pairing_backend(bool allow_cpu_device, std::string* why_not) {
+  auto runtime = Runtime::get(allow_cpu_device, why_not);
+  if (!runtime) return nullptr;
+  try {
+    return std::make_unique<OpenClPairingBackend>(runtime);
+  } catch (const std::exception& e) {
+    if (why_not) *why_not = e.what();
+    return nullptr;
+  }
+}
+
+}  // namespace minemap::opencl

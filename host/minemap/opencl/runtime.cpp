@@ -1,0 +1,190 @@
+#include "minemap/opencl/runtime.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cstdlib>
+#include <sstream>
+#include <vector>
+
+#include "minemap/kernels_embedded.hpp"
+
+namespace minemap::opencl {
+namespace {
+
+std::string lower(std::string text) {
+  std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::tolower(c); });
+  return text;
+}
+
+std::string kernel_source() {
+  std::string source;
+  for (const char* chunk : kernels::kSourceChunks) source += chunk;
+  return source;
+}
+
+struct Candidate {
+  cl::Device device;
+  std::string label;  // "platform / device"
+  bool is_gpu = false;
+  bool discrete = false;
+  cl_uint compute_units = 0;
+};
+
+std::vector<Candidate> list_devices() {
+  std::vector<Candidate> candidates;
+  std::vector<cl::Platform> platforms;
+  cl::Platform::get(&platforms);
+  for (auto& platform : platforms) {
+    std::vector<cl::Device> devices;
+    try {
+      platform.getDevices(CL_DEVICE_TYPE_ALL, &devices);
+    } catch (const cl::Error&) {
+      continue;  // a platform with no devices (CL_DEVICE_NOT_FOUND)
+    }
+    for (auto& device : devices) {
+      if (!device.getInfo<CL_DEVICE_AVAILABLE>() || !device.getInfo<CL_DEVICE_COMPILER_AVAILABLE>()) continue;
+      Candidate c;
+      c.device = device;
+      c.label = platform.getInfo<CL_PLATFORM_NAME>() + " / " + device.getInfo<CL_DEVICE_NAME>();
+      c.is_gpu = (device.getInfo<CL_DEVICE_TYPE>() & CL_DEVICE_TYPE_GPU) != 0;
+      c.discrete = !device.getInfo<CL_DEVICE_HOST_UNIFIED_MEMORY>();
+      c.compute_units = device.getInfo<CL_DEVICE_MAX_COMPUTE_UNITS>();
+      candidates.push_back(std::move(c));
+    }
+  }
+  return candidates;
+}
+
+/// The best device for minemap, or nullptr-equivalent (empty label) with the reason.
+Candidate pick_device(std::string* why_not) {
+  const char* disabled = std::getenv("MINEMAP_OPENCL");
+  if (disabled && lower(disabled) == "off") {
+    *why_not = "OpenCL disabled by MINEMAP_OPENCL=off";
+    return {};
+  }
+  std::vector<Candidate> candidates;
+  try {
+    candidates = list_devices();
+  } catch (const cl::Error& e) {
+    *why_not = std::string("no OpenCL platform found (") + e.what() + ": " + error_name(e.err()) +
+               "); install an ICD such as pocl-opencl-icd or a GPU driver";
+    return {};
+  }
+  if (candidates.empty()) {
+    *why_not = "no available OpenCL device with a compiler";
+    return {};
+  }
+  if (const char* wanted = std::getenv("MINEMAP_OPENCL_DEVICE"); wanted && *wanted) {
+    for (auto& c : candidates) {
+      if (lower(c.label).find(lower(wanted)) != std::string::npos) return c;
+    }
+    *why_not = std::string("MINEMAP_OPENCL_DEVICE='") + wanted + "' matches no device";
+    return {};
+  }
+  auto rank = [](const Candidate& c) { return std::make_tuple(c.is_gpu, c.discrete, c.compute_units); };
+  return *std::max_element(candidates.begin(), candidates.end(),
+                           [&](const Candidate& a, const Candidate& b) { return rank(a) < rank(b); });
+}
+
+}  // namespace
+
+const char* error_name(cl_int code) {
+  switch (code) {
+#define MM_CASE(x) \
+  case x: return #x;
+    MM_CASE(CL_SUCCESS) MM_CASE(CL_DEVICE_NOT_FOUND) MM_CASE(CL_DEVICE_NOT_AVAILABLE)
+    MM_CASE(CL_COMPILER_NOT_AVAILABLE) MM_CASE(CL_MEM_OBJECT_ALLOCATION_FAILURE) MM_CASE(CL_OUT_OF_RESOURCES)
+    MM_CASE(CL_OUT_OF_HOST_MEMORY) MM_CASE(CL_BUILD_PROGRAM_FAILURE) MM_CASE(CL_INVALID_VALUE)
+    MM_CASE(CL_INVALID_DEVICE) MM_CASE(CL_INVALID_CONTEXT) MM_CASE(CL_INVALID_COMMAND_QUEUE)
+    MM_CASE(CL_INVALID_MEM_OBJECT) MM_CASE(CL_INVALID_BUILD_OPTIONS) MM_CASE(CL_INVALID_PROGRAM)
+    MM_CASE(CL_INVALID_PROGRAM_EXECUTABLE) MM_CASE(CL_INVALID_KERNEL_NAME) MM_CASE(CL_INVALID_KERNEL)
+    MM_CASE(CL_INVALID_ARG_INDEX) MM_CASE(CL_INVALID_ARG_VALUE) MM_CASE(CL_INVALID_ARG_SIZE)
+    MM_CASE(CL_INVALID_KERNEL_ARGS) MM_CASE(CL_INVALID_WORK_DIMENSION) MM_CASE(CL_INVALID_WORK_GROUP_SIZE)
+    MM_CASE(CL_INVALID_WORK_ITEM_SIZE) MM_CASE(CL_INVALID_GLOBAL_OFFSET) MM_CASE(CL_INVALID_EVENT_WAIT_LIST)
+    MM_CASE(CL_INVALID_OPERATION) MM_CASE(CL_INVALID_BUFFER_SIZE) MM_CASE(CL_INVALID_GLOBAL_WORK_SIZE)
+    MM_CASE(CL_PLATFORM_NOT_FOUND_KHR)
+#undef MM_CASE
+    default: return "CL_UNKNOWN_ERROR";
+  }
+}
+
+void rethrow_as_device_error(const std::string& what) {
+  try {
+    throw;
+  } catch (const cl::BuildError& e) {
+    std::ostringstream text;
+    text << what << ": kernel build failed (" << error_name(e.err()) << ")";
+    for (const auto& [device, log] : e.getBuildLog()) text << "\n--- build log ---\n" << log;
+    throw DeviceError(text.str());
+  } catch (const cl::Error& e) {
+    throw DeviceError(what + ": " + e.what() + ": " + error_name(e.err()));
+  }
+}
+
+Runtime::Runtime(cl::Device device, bool is_gpu) : device_(std::move(device)), is_gpu_(is_gpu) {
+  try {
+    context_ = cl::Context(device_);
+    queue_ = cl::CommandQueue(context_, device_);
+    cl::Platform platform(device_.getInfo<CL_DEVICE_PLATFORM>());
+    description_ = platform.getInfo<CL_PLATFORM_NAME>() + " / " + device_.getInfo<CL_DEVICE_NAME>() + " (driver " +
+                   device_.getInfo<CL_DRIVER_VERSION>() + ", " + device_.getInfo<CL_DEVICE_VERSION>() + ")";
+    max_alloc_bytes_ = device_.getInfo<CL_DEVICE_MAX_MEM_ALLOC_SIZE>();
+    std::string options = "-cl-std=CL1.2";
+    // Correctly rounded division and sqrt make the filter's means and ranges equal the CPU's bits.
+    if (device_.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>() & CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT) {
+      options += " -cl-fp32-correctly-rounded-divide-sqrt";
+    }
+    program_ = cl::Program(context_, kernel_source());
+    program_.build({device_}, options.c_str());
+  } catch (...) {
+    rethrow_as_device_error("OpenCL setup on " + (description_.empty() ? std::string("device") : description_));
+  }
+}
+
+std::shared_ptr<Runtime> Runtime::get(bool allow_cpu_device, std::string* why_not) {
+  static std::mutex mutex;
+  static std::shared_ptr<Runtime> runtime;
+  static std::string failure;
+  static bool tried = false;
+  static bool picked_gpu = false;
+  static bool explicitly_named = false;
+  std::lock_guard lock(mutex);
+  if (!tried) {
+    tried = true;
+    Candidate c = pick_device(&failure);
+    if (c.device()) {
+      picked_gpu = c.is_gpu;
+      explicitly_named = std::getenv("MINEMAP_OPENCL_DEVICE") != nullptr;
+      try {
+        runtime = std::make_shared<Runtime>(c.device, c.is_gpu);
+      } catch (const std::exception& e) {
+        failure = e.what();
+      }
+    }
+  }
+  if (!runtime) {
+    if (why_not) *why_not = failure;
+    return nullptr;
+  }
+  if (!allow_cpu_device && !picked_gpu && !explicitly_named) {
+    if (why_not) *why_not = "no OpenCL GPU found (only " + runtime->description() + "; use --backend opencl to run on it)";
+    return nullptr;
+  }
+  return runtime;
+}
+
+std::size_t Runtime::work_group_size(const cl::Kernel& kernel, std::size_t wanted) const {
+  const std::size_t limit = std::min(kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(device_),
+                                     device_.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>());
+  std::size_t size = 1;
+  while (size * 2 <= std::min(limit, wanted)) size *= 2;
+  return size;
+}
+
+std::string describe_device(bool allow_cpu_device) {
+  std::string why;
+  auto runtime = Runtime::get(allow_cpu_device, &why);
+  return runtime ? runtime->description() : "none: " + why;
+}
+
+}  // namespace minemap::opencl

@@ -1,0 +1,59 @@
+#pragma once
+// Slice filtering and data reduction (paper, section IV.C), per 2D slice in scanner order:
+//  1. median filter: a point whose range differs from the median range of its window (n = 7
+//     neighbours by index) by more than 200 cm is replaced by the median point (salt and pepper);
+//  2. reduction: consecutive points closer than 10 cm are joined into their mean, so consecutive
+//     output points of a slice are at least 10 cm apart (lowers Gaussian noise);
+//  3. vertical reduction: only every third slice goes to matching.
+//
+// Backends: CPU reference (slice_filter_cpu.cpp, TBB over slices) and OpenCL
+// (kernels/slice_filter.cl, one work-item per slice); `filter_scan` is the dispatch point. Both
+// compute in float in the same order and give the same bits on every test input.
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "minemap/core/scan.hpp"
+
+namespace minemap {
+
+struct SliceFilterSettings {
+  bool median_enabled = true;
+  int median_window = 7;                  ///< points in the window, odd, 1..31 (paper: n = 7)
+  float outlier_threshold_cm = 200.0f;    ///< replace only beyond this range difference (paper: 200 cm)
+  bool reduction_enabled = true;
+  float min_point_spacing_cm = 10.0f;     ///< consecutive reduced points at least this far apart
+  int slice_stride = 3;                   ///< keep slices 0, stride, 2*stride, ... (paper: every third)
+
+  /// Throws std::invalid_argument naming the bad setting.
+  void validate() const;
+};
+
+/// What the filter did, and its output cloud.
+struct SliceFilterResult {
+  std::vector<Eigen::Vector3f> points_cm;     ///< reduced points, kept slices in order
+  std::vector<std::uint32_t> slice_offsets;   ///< output slices (one per kept slice)
+  std::size_t points_in = 0;                  ///< all points of the scan
+  std::size_t points_in_kept_slices = 0;
+  std::size_t outliers_replaced = 0;
+  std::size_t points_out() const { return points_cm.size(); }
+  std::string backend;                        ///< "cpu" or "opencl"
+};
+
+/// CPU reference. A scan without slices is returned unchanged (with a note in `backend`).
+SliceFilterResult filter_scan_cpu(const Scan& scan, const SliceFilterSettings& settings);
+
+enum class Backend;
+
+/// The dispatch point: OpenCL when `backend` asks for it (or auto finds a GPU), else the CPU path.
+/// `note` receives a message when the requested backend was not used (fallback) or the scan has no
+/// slices (the filter is skipped).
+SliceFilterResult filter_scan(const Scan& scan, const SliceFilterSettings& settings, Backend backend,
+                              std::string* note = nullptr);
+
+/// Scans without slice structure (PCD, KITTI, PLY) skip the slice filter; matching uses them
+/// after this uniform thinning instead: every `stride`-th point (1 = all points).
+std::vector<Eigen::Vector3f> thin_unstructured(const Scan& scan, int stride);
+
+}  // namespace minemap

@@ -1,0 +1,59 @@
+#pragma once
+// ICP (paper, section IV.A): closest-point pairs, Horn's closed form, iterate. With the approximate
+// kd-tree the paper's schedule applies: approximate search while the error E(R, t) keeps falling,
+// then exact search until convergence (usually 1-3 more iterations).
+#include <span>
+#include <string>
+
+#include "minemap/core/pose.hpp"
+#include "minemap/search/pairing.hpp"
+
+namespace minemap {
+
+struct IcpSettings {
+  /// kExact: exact kd-tree only. kApproximate: the paper's schedule (approximate, then exact).
+  /// kBruteForce: brute force only (the Table I baseline).
+  SearchMethod method = SearchMethod::kApproximate;
+  float max_pair_dist_cm = 25.0f;          ///< 3DTK's default
+  int max_iterations = 100;                ///< approximate and exact together
+  double min_translation_step_cm = 0.001;  ///< converged when one iteration moves less than this...
+  double min_rotation_step_deg = 0.0001;   ///< ...and turns less than this
+  int min_pairs = 250;                     ///< fewer pairs: no overlap, registration fails
+};
+
+enum class IcpStop {
+  kConverged,      ///< the step fell below both thresholds
+  kMaxIterations,  ///< the iteration cap was reached (the pose is still returned)
+  kTooFewPairs,    ///< fewer than min_pairs pairs: the scans do not overlap (failure)
+  kNumericFailure, ///< NaN or degenerate geometry (failure)
+};
+const char* to_string(IcpStop stop);
+
+/// One registration's outcome. On failure (`ok()` false) `world_from_data` is the initial pose.
+struct IcpResult {
+  Pose world_from_data = Pose::Identity();  ///< T_world_points of the data cloud
+  int approximate_iterations = 0;
+  int exact_iterations = 0;
+  std::size_t pairs = 0;  ///< pairs in the last iteration
+  double rms_cm = 0.0;    ///< RMS pair distance in the last iteration
+  IcpStop stop = IcpStop::kConverged;
+  bool ok() const { return stop == IcpStop::kConverged || stop == IcpStop::kMaxIterations; }
+  bool converged() const { return stop == IcpStop::kConverged; }
+  int iterations() const { return approximate_iterations + exact_iterations; }
+};
+
+/// A model cloud placed in the world (T_world_points of the model).
+struct WorldModel {
+  const PreparedCloud* cloud = nullptr;
+  Pose world_from_model = Pose::Identity();
+};
+
+/// Registers `data` (initially at `world_from_data`) against the union of `models`.
+IcpResult register_icp(PairingBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
+                       std::span<const WorldModel> models, const IcpSettings& settings);
+
+/// Pairs between `data` and one model at the given poses (exact search): the paper's overlap test.
+std::size_t count_pairs(PairingBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
+                        const WorldModel& model, float max_pair_dist_cm);
+
+}  // namespace minemap

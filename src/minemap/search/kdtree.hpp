@@ -1,0 +1,75 @@
+#pragma once
+// The paper's bucket kd-tree (section IV.D): terminal buckets of `bucket_size` points; each inner
+// node cuts the volume of its points into two equal halves along the longest extent, storing the
+// cut dimension and value. Leaves also store the mean of their points for the approximate kd-tree
+// (Greenspan and Yurick's Apr-kd-tree with the paper's twist: return the bucket mean, no scan).
+//
+// The tree is flat (nodes, reordered points, leaf means), so the CPU search and the OpenCL kernels
+// traverse the very same arrays; the OpenCL backend uploads them unchanged.
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace minemap {
+
+struct KdTreeSettings {
+  int bucket_size = 10;  ///< points per terminal bucket (paper: 10; Fig. 5 sweeps 1..100)
+};
+
+/// 16 bytes, laid out as OpenCL's int4 {axis, a, b, split bits}.
+/// Inner node: axis in 0..2, a = left child, b = right child, split = cut value (cm).
+/// Leaf: axis = kLeaf, a = first point in `points`, b = count, split bits = leaf index (int).
+struct KdNode {
+  static constexpr std::int32_t kLeaf = -1;
+  std::int32_t axis = kLeaf;
+  std::int32_t a = 0;
+  std::int32_t b = 0;
+  std::int32_t split_bits = 0;  ///< float cut value (inner) or int leaf index (leaf), bit-cast
+};
+static_assert(sizeof(KdNode) == 16);
+
+/// Point stored in the tree: xyz in cm, w = the point's index in the input cloud (int bits).
+struct KdPoint {
+  float x, y, z;
+  std::int32_t original_index;
+};
+static_assert(sizeof(KdPoint) == 16);
+
+/// An immutable bucket kd-tree over a float cloud. Thread-safety: const after construction, so any
+/// number of threads may search it at once. Units: those of the input points (cm in minemap).
+class KdTree {
+ public:
+  KdTree() = default;
+  KdTree(std::span<const Eigen::Vector3f> points, const KdTreeSettings& settings = {});
+
+  std::span<const KdNode> nodes() const { return nodes_; }
+  std::span<const KdPoint> points() const { return points_; }
+  /// Leaf means as float4 (w = point count), indexed by leaf index.
+  std::span<const std::array<float, 4>> leaf_means() const { return leaf_means_; }
+  std::size_t size() const { return points_.size(); }
+  bool empty() const { return points_.empty(); }
+  int depth() const { return depth_; }
+  const Eigen::Vector3f& bounds_min() const { return bounds_min_; }
+  const Eigen::Vector3f& bounds_max() const { return bounds_max_; }
+  int bucket_size() const { return settings_.bucket_size; }
+
+ private:
+  std::int32_t build(std::int32_t begin, std::int32_t end, int depth);
+
+  KdTreeSettings settings_;
+  std::vector<KdNode> nodes_;
+  std::vector<KdPoint> points_;
+  std::vector<std::array<float, 4>> leaf_means_;
+  Eigen::Vector3f bounds_min_ = Eigen::Vector3f::Zero();
+  Eigen::Vector3f bounds_max_ = Eigen::Vector3f::Zero();
+  int depth_ = 0;
+};
+
+/// The deepest traversal stack any search may need (depth of a tree over 2^31 points with equal
+/// halves is bounded by the float mantissa: a cut can halve an extent at most ~150 times before
+/// halves become equal floats; the builder stops cutting there).
+inline constexpr int kMaxKdDepth = 64;
+
+}  // namespace minemap

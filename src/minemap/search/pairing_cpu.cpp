@@ -1,0 +1,138 @@
+// The CPU pairing backend: TBB-parallel over fixed blocks of queries. Each block sums its pairs in
+// double; blocks are added in index order, so the result is bit-identical for any thread count.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <limits>
+
+#include "minemap/search/pairing.hpp"
+#include "minemap/search/pairing_math.hpp"
+
+namespace minemap {
+namespace {
+
+constexpr std::size_t kQueriesPerBlock = 1024;
+
+class CpuPreparedCloud final : public PreparedCloud {
+ public:
+  CpuPreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& settings)
+      : PreparedCloud(std::move(points), settings) {}
+};
+
+/// One model as the hot loop needs it: data->model and model->data transforms in float.
+struct PlacedModel {
+  const KdTree* tree;
+  detail::RigidF model_from_data;
+  detail::RigidF data_from_model;
+};
+
+std::vector<PlacedModel> place_models(std::span<const ModelPlacement> models) {
+  std::vector<PlacedModel> placed;
+  placed.reserve(models.size());
+  for (const auto& m : models) {
+    const Pose inverse = rigid_inverse(m.model_from_data);
+    placed.push_back({&m.model->tree(),
+                      {m.model_from_data.block<3, 3>(0, 0).cast<float>(), m.model_from_data.block<3, 1>(0, 3).cast<float>()},
+                      {inverse.block<3, 3>(0, 0).cast<float>(), inverse.block<3, 1>(0, 3).cast<float>()}});
+  }
+  return placed;
+}
+
+/// The closest point of data point `p` over all models.
+NearestPair find_nearest(const Eigen::Vector3f& p, const std::vector<PlacedModel>& models, SearchMethod method,
+                         float max_squared_distance) {
+  NearestPair result;
+  float best = max_squared_distance;
+  for (std::size_t k = 0; k < models.size(); ++k) {
+    const PlacedModel& model = models[k];
+    if (model.tree->empty()) continue;
+    const Eigen::Vector3f q = model.model_from_data.apply(p);
+    if (detail::squared_distance_to_bounds(*model.tree, q) >= best) continue;
+    if (method == SearchMethod::kApproximate) {
+      const auto& mean = model.tree->leaf_means()[static_cast<std::size_t>(detail::approximate_leaf(*model.tree, q))];
+      const Eigen::Vector3f m(mean[0], mean[1], mean[2]);
+      const float d = detail::squared_distance(mean[0], mean[1], mean[2], q);
+      if (d < best) {
+        best = d;
+        result = {d, static_cast<std::int32_t>(k), -1, model.data_from_model.apply(m)};
+      }
+      continue;
+    }
+    std::int32_t hit = -1;
+    if (method == SearchMethod::kExact) {
+      detail::exact_nearest(*model.tree, q, best, hit);
+    } else {
+      detail::brute_force_nearest(*model.tree, q, best, hit);
+    }
+    if (hit >= 0) {
+      const KdPoint& m = model.tree->points()[static_cast<std::size_t>(hit)];
+      result = {best, static_cast<std::int32_t>(k), m.original_index,
+                model.data_from_model.apply(Eigen::Vector3f(m.x, m.y, m.z))};
+    }
+  }
+  return result;
+}
+
+class CpuPairingBackend final : public PairingBackend {
+ public:
+  std::string name() const override { return "cpu"; }
+  std::string device_description() const override { return "CPU (TBB bucket kd-tree)"; }
+
+  std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points_cm,
+                                               const KdTreeSettings& tree_settings) override {
+    return std::make_shared<CpuPreparedCloud>(std::move(points_cm), tree_settings);
+  }
+
+  PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
+                        const PairingSettings& settings) override {
+    const auto placed = place_models(models);
+    const auto points = data.points();
+    const Eigen::Vector3d reference = data.centroid_cm();
+    const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
+    const std::size_t blocks = (points.size() + kQueriesPerBlock - 1) / kQueriesPerBlock;
+    std::vector<PairSums> partial(blocks);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const tbb::blocked_range<std::size_t>& range) {
+      for (std::size_t b = range.begin(); b != range.end(); ++b) {
+        PairSums sums;
+        const std::size_t end = std::min(points.size(), (b + 1) * kQueriesPerBlock);
+        for (std::size_t i = b * kQueriesPerBlock; i < end; ++i) {
+          const NearestPair pair = find_nearest(points[i], placed, method, max_squared);
+          if (pair.squared_distance_cm2 < 0.0f) continue;
+          const Eigen::Vector3d p = points[i].cast<double>() - reference;
+          const Eigen::Vector3d m = pair.position_cm.cast<double>() - reference;
+          sums.count += 1.0;
+          sums.sum_data += p;
+          sums.sum_model += m;
+          sums.sum_data_model.noalias() += p * m.transpose();
+          sums.sum_squared_distance_cm2 += pair.squared_distance_cm2;
+        }
+        partial[b] = sums;
+      }
+    });
+    PairSums total;
+    total.reference_cm = reference;
+    for (const auto& s : partial) total += s;
+    return total;
+  }
+
+  std::vector<NearestPair> nearest(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
+                                   const PairingSettings& settings) override {
+    const auto placed = place_models(models);
+    const auto points = data.points();
+    const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
+    std::vector<NearestPair> result(points.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), kQueriesPerBlock),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                          result[i] = find_nearest(points[i], placed, method, max_squared);
+                        }
+                      });
+    return result;
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<PairingBackend> make_cpu_pairing_backend() { return std::make_unique<CpuPairingBackend>(); }
+
+}  // namespace minemap

@@ -1,0 +1,241 @@
+// Closest-point search against a brute-force oracle, on both backends. Distances are compared,
+// never indices (ties are legal).
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cmath>
+#include <limits>
+
+#include "minemap/search/kdtree.hpp"
+#include "minemap/search/pairing.hpp"
+#include "test_support.hpp"
+
+namespace minemap {
+namespace {
+
+using test::random_cloud;
+
+/// The oracle: smallest squared distance from q to any point, in double.
+double oracle_squared_distance(const std::vector<Eigen::Vector3f>& model, const Eigen::Vector3f& q) {
+  double best = std::numeric_limits<double>::infinity();
+  for (const auto& m : model) best = std::min(best, (m.cast<double>() - q.cast<double>()).squaredNorm());
+  return best;
+}
+
+std::unique_ptr<PairingBackend> backend_named(const std::string& name) {
+  if (name == "cpu") return make_cpu_pairing_backend();
+  return make_pairing_backend(Backend::kOpenCl).backend;  // throws (test fails) without OpenCL
+}
+
+class SearchTest : public ::testing::TestWithParam<std::string> {
+ protected:
+  void SetUp() override { backend_ = backend_named(GetParam()); }
+  std::unique_ptr<PairingBackend> backend_;
+};
+
+TEST_P(SearchTest, ExactMatchesBruteForceOracleOnRandomCloud) {
+  const auto model_points = random_cloud(5000, -500.f, 500.f, 1);
+  const auto query_points = random_cloud(2000, -550.f, 550.f, 2);
+  auto model = backend_->prepare(model_points, {});
+  auto data = backend_->prepare(query_points, {});
+  const ModelPlacement placement{model.get(), Pose::Identity()};
+  const float max_dist = 60.0f;
+  for (auto method : {SearchMethod::kExact, SearchMethod::kBruteForce}) {
+    const auto pairs = backend_->nearest(*data, {&placement, 1}, method, {max_dist});
+    int paired = 0;
+    for (std::size_t i = 0; i < query_points.size(); ++i) {
+      const double expected = oracle_squared_distance(model_points, query_points[i]);
+      if (expected < max_dist * max_dist * 0.999) {
+        ASSERT_GE(pairs[i].squared_distance_cm2, 0.0f) << "query " << i << " should pair (" << to_string(method) << ")";
+        EXPECT_NEAR(pairs[i].squared_distance_cm2, expected, 1e-3 * (1.0 + expected)) << "query " << i;
+        const auto& hit = model_points[static_cast<std::size_t>(pairs[i].model_point)];
+        EXPECT_NEAR((hit - pairs[i].position_cm).norm(), 0.0, 1e-3);
+        ++paired;
+      } else if (expected > max_dist * max_dist * 1.001) {
+        EXPECT_LT(pairs[i].squared_distance_cm2, 0.0f) << "query " << i << " is beyond the bound";
+      }
+    }
+    EXPECT_GT(paired, 500);
+  }
+}
+
+TEST_P(SearchTest, ApproximateReturnsTheMeanOfTheQueryLeaf) {
+  const auto model_points = random_cloud(3000, 0.f, 1000.f, 3);
+  const auto query_points = random_cloud(500, 0.f, 1000.f, 4);
+  auto model = backend_->prepare(model_points, {});
+  auto data = backend_->prepare(query_points, {});
+  const ModelPlacement placement{model.get(), Pose::Identity()};
+  const auto pairs = backend_->nearest(*data, {&placement, 1}, SearchMethod::kApproximate, {1e6f});
+  const KdTree& tree = model->tree();
+  for (std::size_t i = 0; i < query_points.size(); ++i) {
+    // Descend by hand to the leaf whose region holds the query, then average its bucket.
+    std::int32_t node = 0;
+    while (tree.nodes()[node].axis != KdNode::kLeaf) {
+      const auto& n = tree.nodes()[node];
+      node = query_points[i][n.axis] < std::bit_cast<float>(n.split_bits) ? n.a : n.b;
+    }
+    const auto& leaf = tree.nodes()[node];
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (int k = leaf.a; k < leaf.a + leaf.b; ++k) {
+      const auto& p = tree.points()[k];
+      mean += Eigen::Vector3d(p.x, p.y, p.z);
+    }
+    mean /= leaf.b;
+    ASSERT_GE(pairs[i].squared_distance_cm2, 0.0f);
+    EXPECT_NEAR((pairs[i].position_cm.cast<double>() - mean).norm(), 0.0, 1e-3) << "query " << i;
+    EXPECT_EQ(pairs[i].model_point, -1);
+  }
+}
+
+TEST_P(SearchTest, EdgeCases) {
+  // Fewer points than a bucket, duplicates, points on cut planes, far queries, tiny bound.
+  std::vector<Eigen::Vector3f> few = {{0, 0, 0}, {10, 0, 0}, {10, 0, 0}, {5, 5, 5}};
+  std::vector<Eigen::Vector3f> grid;
+  for (int x = 0; x < 20; ++x)
+    for (int y = 0; y < 20; ++y) grid.emplace_back(static_cast<float>(x) * 10.f, static_cast<float>(y) * 10.f, 0.f);
+  for (int d = 0; d < 50; ++d) grid.emplace_back(50.f, 50.f, 0.f);  // duplicates of a grid point
+  std::vector<Eigen::Vector3f> queries = {{0, 0, 0}, {5, 0, 0}, {95, 95, 0}, {45, 45, 0}, {1e5f, 0, 0}, {50, 50, 0}};
+  for (const auto* model_points : {&few, &grid}) {
+    auto model = backend_->prepare(*model_points, {});
+    auto data = backend_->prepare(queries, {});
+    const ModelPlacement placement{model.get(), Pose::Identity()};
+    const auto pairs = backend_->nearest(*data, {&placement, 1}, SearchMethod::kExact, {100.f});
+    for (std::size_t i = 0; i < queries.size(); ++i) {
+      const double expected = oracle_squared_distance(*model_points, queries[i]);
+      if (expected < 100.0 * 100.0) {
+        EXPECT_NEAR(pairs[i].squared_distance_cm2, expected, 1e-3) << "query " << i;
+      } else {
+        EXPECT_LT(pairs[i].squared_distance_cm2, 0.f) << "query " << i;
+      }
+    }
+    const auto none = backend_->nearest(*data, {&placement, 1}, SearchMethod::kExact, {1e-4f});
+    EXPECT_LT(none[1].squared_distance_cm2, 0.f);  // bound smaller than every distance
+  }
+}
+
+TEST_P(SearchTest, EmptyModelAndEmptyData) {
+  auto empty = backend_->prepare({}, {});
+  auto cloud = backend_->prepare(random_cloud(100, 0.f, 10.f, 5), {});
+  const ModelPlacement to_empty{empty.get(), Pose::Identity()};
+  const auto sums = backend_->pair_and_sum(*cloud, {&to_empty, 1}, SearchMethod::kExact, {25.f});
+  EXPECT_EQ(sums.count, 0.0);
+  const ModelPlacement to_cloud{cloud.get(), Pose::Identity()};
+  EXPECT_EQ(backend_->pair_and_sum(*empty, {&to_cloud, 1}, SearchMethod::kExact, {25.f}).count, 0.0);
+}
+
+TEST_P(SearchTest, UnionOfModelsFindsTheClosestOverAll) {
+  // Two model clouds placed apart; the union must give the closest point over both.
+  const auto a = random_cloud(2000, 0.f, 300.f, 6);
+  const auto b = random_cloud(2000, 0.f, 300.f, 7);
+  const auto q = random_cloud(1000, 0.f, 600.f, 8);
+  auto ma = backend_->prepare(a, {});
+  auto mb = backend_->prepare(b, {});
+  auto data = backend_->prepare(q, {});
+  Pose b_from_data = Pose::Identity();
+  b_from_data(0, 3) = -300.0;  // model b occupies x in [300, 600] of the data frame
+  const std::vector<ModelPlacement> models = {{ma.get(), Pose::Identity()}, {mb.get(), b_from_data}};
+  const auto pairs = backend_->nearest(*data, models, SearchMethod::kExact, {30.f});
+  std::vector<Eigen::Vector3f> both = a;
+  for (const auto& p : b) both.emplace_back(p.x() + 300.f, p.y(), p.z());
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    const double expected = oracle_squared_distance(both, q[i]);
+    if (expected < 30.0 * 30.0 * 0.999) {
+      ASSERT_GE(pairs[i].squared_distance_cm2, 0.f);
+      EXPECT_NEAR(pairs[i].squared_distance_cm2, expected, 1e-2 * (1 + expected));
+    }
+  }
+}
+
+TEST_P(SearchTest, SumsMatchDoubleReferenceFarFromOrigin) {
+  // A cloud 1 km from the origin: centred sums keep full accuracy.
+  auto model_points = random_cloud(20000, -500.f, 500.f, 9);
+  for (auto& p : model_points) p += Eigen::Vector3f(100000.f, 0.f, 50000.f);
+  std::vector<Eigen::Vector3f> data_points;
+  for (std::size_t i = 0; i < model_points.size(); i += 2) data_points.push_back(model_points[i] + Eigen::Vector3f(1.f, 2.f, -1.f));
+  auto model = backend_->prepare(model_points, {});
+  auto data = backend_->prepare(data_points, {});
+  const ModelPlacement placement{model.get(), Pose::Identity()};
+  const auto sums = backend_->pair_and_sum(*data, {&placement, 1}, SearchMethod::kExact, {25.f});
+  const auto pairs = make_cpu_pairing_backend()->nearest(*data, {&placement, 1}, SearchMethod::kExact, {25.f});
+  PairSums reference;
+  reference.reference_cm = sums.reference_cm;  // the reference the backend centred on
+  double magnitude = 0.0;                      // sum of |p'|: the scale float round-off works at
+  for (std::size_t i = 0; i < data_points.size(); ++i) {
+    if (pairs[i].squared_distance_cm2 < 0) continue;
+    const Eigen::Vector3d p = data_points[i].cast<double>() - reference.reference_cm;
+    const Eigen::Vector3d m = pairs[i].position_cm.cast<double>() - reference.reference_cm;
+    reference.count += 1;
+    reference.sum_data += p;
+    reference.sum_model += m;
+    reference.sum_data_model += p * m.transpose();
+    reference.sum_squared_distance_cm2 += (p - m).squaredNorm();
+    magnitude += p.norm();
+  }
+  ASSERT_GT(reference.count, 1000);
+  EXPECT_EQ(sums.count, reference.count);
+  const double scale = reference.sum_data_model.norm();
+  EXPECT_LT((sums.sum_data_model - reference.sum_data_model).norm() / scale, 1e-6);
+  EXPECT_LT((sums.sum_data - reference.sum_data).norm() / magnitude, 1e-6);
+  EXPECT_LT((sums.sum_model - reference.sum_model).norm() / magnitude, 1e-6);
+  EXPECT_NEAR(sums.sum_squared_distance_cm2 / reference.sum_squared_distance_cm2, 1.0, 1e-5);
+}
+
+TEST_P(SearchTest, SumsAreBitIdenticalRunToRun) {
+  const auto cloud = random_cloud(30000, 0.f, 2000.f, 10);
+  auto model = backend_->prepare(cloud, {});
+  auto data = backend_->prepare(random_cloud(30000, 0.f, 2000.f, 11), {});
+  const ModelPlacement placement{model.get(), Pose::Identity()};
+  const auto first = backend_->pair_and_sum(*data, {&placement, 1}, SearchMethod::kExact, {25.f});
+  const auto second = backend_->pair_and_sum(*data, {&placement, 1}, SearchMethod::kExact, {25.f});
+  EXPECT_EQ(first.count, second.count);
+  EXPECT_EQ(first.sum_data_model, second.sum_data_model);
+  EXPECT_EQ(first.sum_squared_distance_cm2, second.sum_squared_distance_cm2);
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, SearchTest, ::testing::Values("cpu", "opencl"));
+
+TEST(SearchBackends, CpuAndOpenClFindTheSameDistances) {
+  auto cpu = make_cpu_pairing_backend();
+  auto device = make_pairing_backend(Backend::kOpenCl).backend;
+  const auto model_points = random_cloud(20000, -1000.f, 1000.f, 12);
+  const auto query_points = random_cloud(10000, -1000.f, 1000.f, 13);
+  Pose placement_pose = euler_to_pose({Eigen::Vector3d(12.0, -7.0, 30.0), Eigen::Vector3d(1.0, -2.0, 3.0)});
+  auto cm = cpu->prepare(model_points, {});
+  auto cd = cpu->prepare(query_points, {});
+  auto gm = device->prepare(model_points, {});
+  auto gd = device->prepare(query_points, {});
+  for (auto method : {SearchMethod::kExact, SearchMethod::kApproximate, SearchMethod::kBruteForce}) {
+    const ModelPlacement cp{cm.get(), placement_pose};
+    const ModelPlacement gp{gm.get(), placement_pose};
+    const auto a = cpu->nearest(*cd, {&cp, 1}, method, {40.f});
+    const auto b = device->nearest(*gd, {&gp, 1}, method, {40.f});
+    int mismatches = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      if (a[i].squared_distance_cm2 != b[i].squared_distance_cm2) ++mismatches;
+    }
+    // Contraction is off in the kernels and the C++ build: the distances agree bit for bit.
+    EXPECT_EQ(mismatches, 0) << to_string(method);
+  }
+}
+
+TEST(KdTree, BucketsHoldAtMostBucketSizePointsAndCutInHalves) {
+  const auto cloud = random_cloud(10000, 0.f, 100.f, 14);
+  for (int bucket : {1, 10, 100}) {
+    KdTree tree(cloud, {bucket});
+    std::size_t total = 0;
+    for (const auto& node : tree.nodes()) {
+      if (node.axis == KdNode::kLeaf) {
+        EXPECT_LE(node.b, bucket);
+        total += static_cast<std::size_t>(node.b);
+      }
+    }
+    EXPECT_EQ(total, cloud.size());
+  }
+  // All-duplicate input ends in one oversized bucket instead of infinite recursion.
+  std::vector<Eigen::Vector3f> same(1000, Eigen::Vector3f(1, 2, 3));
+  KdTree dup(same, {10});
+  EXPECT_EQ(dup.nodes().size(), 1u);
+}
+
+}  // namespace
+}  // namespace minemap
