@@ -1,5 +1,11 @@
-// The `minemap` program: simulate a mine survey, map a survey. See README.md.
+// The `minemap` program: simulate the built-in mine survey, and map a survey into one consistent
+// 3D map. See README.md; exit codes in core/error.hpp.
+#include <tbb/info.h>
+#include <tbb/task_arena.h>
+#include <unistd.h>
+
 #include <CLI/CLI.hpp>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -7,20 +13,166 @@
 #include "minemap/core/error.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/sim/mine_simulator.hpp"
+#include "minemap/slam/map_output.hpp"
+#include "minemap/slam/survey_matching.hpp"
 
 namespace {
 
-int run_simulate(const std::filesystem::path& out_dir, int scans, std::uint32_t seed) {
+namespace fs = std::filesystem;
+using minemap::ExitCode;
+
+int exit_code(ExitCode code) { return static_cast<int>(code); }
+
+struct SimulateOptions {
+  fs::path out;
+  int scans = 0;
+  std::uint32_t seed = 1;
+};
+
+struct MapOptions {
+  fs::path survey;
+  fs::path out;
+  std::string mode = "simultaneous";
+  std::string search = "apx";
+  std::string backend = "auto";
+  bool no_filter = false;
+  float max_pair_dist_cm = 25.0f;
+  int max_iterations = 100;
+  std::string unit;  // empty: the format's default
+  int threads = 0;
+  int bucket_size = 10;
+  int median_window = 7;
+  float outlier_threshold_cm = 200.0f;
+  float min_point_spacing_cm = 10.0f;
+  int slice_stride = 3;
+  int point_stride = 1;
+  int min_overlap_pairs = 250;
+  double moved_translation_cm = minemap::MappingSettings{}.moved_translation_cm;
+  double moved_rotation_deg = minemap::MappingSettings{}.moved_rotation_deg;
+  int max_relaxation_matches = 0;
+  std::uint32_t points_per_slice = 0;
+  fs::path initial_poses;
+  bool right_handed_to_3dtk = false;
+  bool quiet = false;
+};
+
+int run_simulate(const SimulateOptions& options) {
   minemap::sim::SimulationSettings settings;
-  settings.mine.scans = scans;
-  settings.mine.seed = seed;
+  settings.mine.scans = options.scans;
+  settings.mine.seed = options.seed;
+  const auto start = std::chrono::steady_clock::now();
   const auto survey = minemap::sim::simulate_mine_survey(settings);
-  std::filesystem::create_directories(out_dir);
-  minemap::io::write_uos_survey(out_dir, survey.scans, survey.truth_cm);
+  fs::create_directories(options.out);
+  minemap::io::write_uos_survey(options.out, survey.scans, survey.truth_cm);
   std::size_t points = 0;
   for (const auto& scan : survey.scans) points += scan.size();
-  std::printf("simulated %zu scans (%zu points, %.1f m driven) into %s\n", survey.scans.size(), points,
-              survey.driven_distance_cm / 100.0, out_dir.c_str());
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf("simulated %zu scans (%zu points, %.1f m driven) into %s in %.1f s\n", survey.scans.size(), points,
+              survey.driven_distance_cm / 100.0, options.out.c_str(), seconds);
+  return 0;
+}
+
+/// A one-line progress bar on stderr, only when stderr is a terminal.
+class ProgressBar {
+ public:
+  explicit ProgressBar(bool enabled) : enabled_(enabled && ::isatty(STDERR_FILENO)) {}
+  ~ProgressBar() {
+    if (enabled_ && drawn_) std::fputs("\n", stderr);
+  }
+  void operator()(std::size_t done, std::size_t total, const std::string& phase) {
+    if (!enabled_ || total == 0) return;
+    constexpr int kWidth = 40;
+    const int filled = static_cast<int>(kWidth * done / total);
+    std::fprintf(stderr, "\r%-13s [%s%s] %zu/%zu", phase.c_str(), std::string(filled, '#').c_str(),
+                 std::string(kWidth - filled, '.').c_str(), done, total);
+    std::fflush(stderr);
+    drawn_ = true;
+  }
+
+ private:
+  bool enabled_;
+  bool drawn_ = false;
+};
+
+void print_errors(const char* label, const minemap::PoseErrors& e, double unit_per_cm, const char* unit) {
+  std::printf("  %-10s mean %.3f %s (%.3f%% of %.1f %s driven), max %.3f %s, mean rotation %.3f deg\n", label,
+              e.mean_translation_cm * unit_per_cm, unit,
+              e.path_length_cm > 0 ? 100.0 * e.mean_translation_cm / e.path_length_cm : 0.0,
+              e.path_length_cm * unit_per_cm, unit, e.max_translation_cm * unit_per_cm, unit, e.mean_rotation_deg);
+}
+
+int run_map(const MapOptions& options) {
+  using namespace minemap;
+  MappingSettings settings;
+  settings.mode = parse_matching_mode(options.mode);
+  settings.icp.method = parse_search_method(options.search);
+  settings.backend = parse_backend(options.backend);
+  settings.filter_enabled = !options.no_filter;
+  settings.icp.max_pair_dist_cm = options.max_pair_dist_cm;
+  settings.icp.max_iterations = options.max_iterations;
+  settings.tree.bucket_size = options.bucket_size;
+  settings.filter.median_window = options.median_window;
+  settings.filter.outlier_threshold_cm = options.outlier_threshold_cm;
+  settings.filter.min_point_spacing_cm = options.min_point_spacing_cm;
+  settings.filter.slice_stride = options.slice_stride;
+  settings.unstructured_point_stride = options.point_stride;
+  settings.min_overlap_pairs = options.min_overlap_pairs;
+  settings.moved_translation_cm = options.moved_translation_cm;
+  settings.moved_rotation_deg = options.moved_rotation_deg;
+  settings.max_relaxation_matches_per_scan = options.max_relaxation_matches;
+  settings.icp.min_pairs = std::min(settings.icp.min_pairs, options.min_overlap_pairs);
+  settings.filter.validate();
+
+  io::SurveyReadSettings read;
+  if (!options.unit.empty()) read.read.unit = parse_length_unit(options.unit);
+  read.read.points_per_slice = options.points_per_slice;
+  read.read.right_handed_to_3dtk = options.right_handed_to_3dtk;
+  if (!options.initial_poses.empty()) read.initial_poses = options.initial_poses;
+
+  // Read everything before touching the output folder: bad input leaves it as it was.
+  auto start = std::chrono::steady_clock::now();
+  const io::Survey survey = io::read_survey(options.survey, read);
+  const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (!options.quiet) {
+    std::printf("read %zu %s scans from %s in %.2f s (unit %s)\n", survey.scans.size(), survey.format.c_str(),
+                options.survey.c_str(), load_s, to_string(survey.unit));
+  }
+
+  ProgressBar bar(!options.quiet);
+  const MappingResult result = map_survey(survey.scans, settings, std::ref(bar));
+  if (!options.quiet) {
+    std::printf("backend: %s\n", result.backend_note.c_str());
+    for (const auto& note : result.notes) std::printf("note: %s\n", note.c_str());
+  }
+
+  MapOutputSettings output;
+  output.unit = survey.unit;
+  output.up_axis = (survey.format == "uos" || options.right_handed_to_3dtk) ? 1 : 2;
+  output.title = "minemap " + std::string(to_string(settings.mode)) + ": " + options.survey.filename().string();
+  output.load_s = load_s;
+  write_map_outputs(options.out, result, survey.truth_cm, settings, output);
+
+  if (!options.quiet) {
+    std::printf("matched %zu scans: %d ICP iterations pairwise, %d in %d relaxation matches; %.2f s filter, "
+                "%.2f s trees, %.2f s pairwise, %.2f s relaxation\n",
+                result.scans.size(), result.step1_icp_iterations, result.step3_icp_iterations,
+                result.relaxation_matches, result.times.filter_s, result.times.tree_build_s, result.times.pairwise_s,
+                result.times.relaxation_s);
+    if (auto comparison = compare_with_truth(result, survey.truth_cm)) {
+      const double unit_per_cm = 1.0 / centimetres_per(survey.unit);
+      std::printf("pose error against the reference poses (relative to the first scan):\n");
+      print_errors("odometry", comparison->odometry, unit_per_cm, to_string(survey.unit));
+      print_errors("registered", comparison->registered, unit_per_cm, to_string(survey.unit));
+    }
+    std::printf("wrote %s (frames, poses, trajectory.tum, map.ply, report.json, top.png, side.png)\n",
+                options.out.c_str());
+  }
+  if (!result.all_registered()) {
+    for (const auto& s : result.scans) {
+      if (!s.registered) std::fprintf(stderr, "minemap: scan %s not registered: %s\n", s.name.c_str(), s.failure.c_str());
+    }
+    return exit_code(ExitCode::kRegistrationFailed);
+  }
   return 0;
 }
 
@@ -29,31 +181,68 @@ int run_simulate(const std::filesystem::path& out_dir, int scans, std::uint32_t 
 int main(int argc, char** argv) {
   CLI::App app{"minemap: 6D SLAM for 3D laser scans of mines (Nuechter et al.)"};
   app.require_subcommand(1);
+  int threads = 0;
+  app.add_option("--threads", threads, "Worker threads (0 = all cores)");
 
-  std::filesystem::path sim_out;
-  int sim_scans = 0;
-  std::uint32_t sim_seed = 1;
+  SimulateOptions sim;
   auto* simulate = app.add_subcommand("simulate", "Write the built-in simulated mine survey (uos format)");
-  simulate->add_option("--out", sim_out, "Output folder")->required();
-  simulate->add_option("--scans", sim_scans, "Number of scans (0 = the whole 250 m drive)");
-  simulate->add_option("--seed", sim_seed, "Random seed");
+  simulate->add_option("--out", sim.out, "Output folder")->required();
+  simulate->add_option("--scans", sim.scans, "Number of scans (0 = the whole 250 m drive)");
+  simulate->add_option("--seed", sim.seed, "Random seed");
+
+  MapOptions map;
+  auto* map_cmd = app.add_subcommand("map", "Register a survey into one consistent map");
+  map_cmd->add_option("survey", map.survey, "Survey folder (uos, pcd, ply or kitti layout)")->required();
+  map_cmd->add_option("--out", map.out, "Output folder")->required();
+  map_cmd->add_option("--mode", map.mode, "pairwise | incremental | simultaneous")->capture_default_str();
+  map_cmd->add_option("--search", map.search, "kd (exact) | apx (approximate, then exact) | brute")->capture_default_str();
+  map_cmd->add_option("--backend", map.backend, "auto | cpu | opencl")->capture_default_str();
+  map_cmd->add_flag("--no-filter", map.no_filter, "Skip the slice filter (median + reduction + every 3rd slice)");
+  map_cmd->add_option("--max-pair-dist-cm", map.max_pair_dist_cm, "Maximum point-pair distance")->capture_default_str();
+  map_cmd->add_option("--max-iterations", map.max_iterations, "ICP iteration cap")->capture_default_str();
+  map_cmd->add_option("--unit", map.unit, "Unit of the survey files: m or cm (default: cm for uos, m otherwise)");
+  map_cmd->add_option("--bucket-size", map.bucket_size, "kd-tree bucket size")->capture_default_str();
+  map_cmd->add_option("--median-window", map.median_window, "Median filter window (points)")->capture_default_str();
+  map_cmd->add_option("--outlier-threshold-cm", map.outlier_threshold_cm, "Median filter threshold")->capture_default_str();
+  map_cmd->add_option("--min-point-spacing-cm", map.min_point_spacing_cm, "Reduction spacing")->capture_default_str();
+  map_cmd->add_option("--slice-stride", map.slice_stride, "Keep every n-th slice")->capture_default_str();
+  map_cmd->add_option("--point-stride", map.point_stride, "Scans without slices: keep every n-th point")->capture_default_str();
+  map_cmd->add_option("--min-overlap-pairs", map.min_overlap_pairs, "Overlap threshold (pairs)")->capture_default_str();
+  map_cmd->add_option("--moved-translation-cm", map.moved_translation_cm,
+                      "Relaxation: a match that moves a scan more than this re-queues its neighbours")
+      ->capture_default_str();
+  map_cmd->add_option("--moved-rotation-deg", map.moved_rotation_deg, "...or turns it more than this")
+      ->capture_default_str();
+  map_cmd->add_option("--max-relaxation-matches", map.max_relaxation_matches,
+                      "Cap on relaxation matches after each new scan (0 = 4 x scans so far)");
+  map_cmd->add_option("--points-per-slice", map.points_per_slice, "uos files without slice markers: points per slice");
+  map_cmd->add_option("--initial-poses", map.initial_poses, "Initial poses (TUM, KITTI, 4x4 or graph file)");
+  map_cmd->add_flag("--right-handed-to-3dtk", map.right_handed_to_3dtk, "Convert right-handed input to 3DTK's frame");
+  map_cmd->add_flag("--quiet", map.quiet, "Print nothing but errors");
 
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : static_cast<int>(minemap::ExitCode::kUsage);
+    return app.exit(e) == 0 ? 0 : exit_code(ExitCode::kUsage);
   }
   try {
-    if (*simulate) return run_simulate(sim_out, sim_scans, sim_seed);
+    const int max_threads = tbb::info::default_concurrency();
+    tbb::task_arena arena(threads > 0 ? std::min(threads, max_threads) : max_threads);
+    return arena.execute([&] {
+      if (*simulate) return run_simulate(sim);
+      return run_map(map);
+    });
   } catch (const minemap::InputError& e) {
     std::cerr << "minemap: " << e.what() << "\n";
-    return static_cast<int>(minemap::ExitCode::kInputError);
+    return exit_code(ExitCode::kInputError);
   } catch (const minemap::OutputError& e) {
     std::cerr << "minemap: " << e.what() << "\n";
-    return static_cast<int>(minemap::ExitCode::kOutputError);
+    return exit_code(ExitCode::kOutputError);
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "minemap: " << e.what() << "\n";
+    return exit_code(ExitCode::kUsage);
   } catch (const std::exception& e) {
-    std::cerr << "minemap: internal error: " << e.what() << "\n";
-    return static_cast<int>(minemap::ExitCode::kInternal);
+    std::cerr << "minemap: error: " << e.what() << "\n";
+    return exit_code(ExitCode::kInternal);
   }
-  return 0;
 }

@@ -1,0 +1,136 @@
+#include "minemap/slam/map_output.hpp"
+
+#include <chrono>
+#include <nlohmann/json.hpp>
+
+#include "minemap/core/atomic_file.hpp"
+#include "minemap/report/map_views.hpp"
+
+namespace minemap {
+namespace {
+
+nlohmann::json pose_json(const Pose& pose_cm, double unit_per_cm) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (int r = 0; r < 4; ++r) {
+    nlohmann::json row = nlohmann::json::array();
+    for (int c = 0; c < 4; ++c) row.push_back(c == 3 && r < 3 ? pose_cm(r, c) * unit_per_cm : pose_cm(r, c));
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+nlohmann::json errors_json(const PoseErrors& e, double unit_per_cm) {
+  return {{"mean_translation", e.mean_translation_cm * unit_per_cm},
+          {"max_translation", e.max_translation_cm * unit_per_cm},
+          {"mean_rotation_deg", e.mean_rotation_deg},
+          {"max_rotation_deg", e.max_rotation_deg},
+          {"mean_relative_translation", e.mean_relative_translation_cm * unit_per_cm},
+          {"max_relative_translation", e.max_relative_translation_cm * unit_per_cm},
+          {"mean_relative_rotation_deg", e.mean_relative_rotation_deg},
+          {"max_relative_rotation_deg", e.max_relative_rotation_deg},
+          {"path_length", e.path_length_cm * unit_per_cm},
+          {"mean_translation_percent_of_path",
+           e.path_length_cm > 0 ? 100.0 * e.mean_translation_cm / e.path_length_cm : 0.0}};
+}
+
+}  // namespace
+
+std::optional<TruthComparison> compare_with_truth(const MappingResult& result,
+                                                  const std::optional<std::vector<Pose>>& truth_cm) {
+  if (!truth_cm || truth_cm->size() != result.scans.size() || result.scans.size() < 2) return std::nullopt;
+  std::vector<Pose> initial, registered;
+  for (const auto& s : result.scans) {
+    initial.push_back(s.initial_pose_cm);
+    registered.push_back(s.pose_cm);
+  }
+  return TruthComparison{pose_errors(initial, *truth_cm), pose_errors(registered, *truth_cm)};
+}
+
+std::string write_map_outputs(const std::filesystem::path& out_dir, const MappingResult& result,
+                              const std::optional<std::vector<Pose>>& truth_cm, const MappingSettings& settings,
+                              const MapOutputSettings& output) {
+  const auto start = std::chrono::steady_clock::now();
+  std::filesystem::create_directories(out_dir);
+  const double unit_per_cm = 1.0 / centimetres_per(output.unit);
+
+  std::vector<io::TimedPose> trajectory;
+  std::vector<Eigen::Vector3f> map_points;
+  std::vector<Eigen::Vector3d> positions, reference_positions;
+  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+    const ScanOutcome& scan = result.scans[i];
+    io::write_uos_frames(out_dir / (scan.name + ".frames"), scan.frames, output.unit);
+    io::write_uos_pose(out_dir / (scan.name + ".pose"), scan.pose_cm, output.unit);
+    trajectory.push_back({static_cast<double>(i), scan.pose_cm});
+    positions.push_back(scan.pose_cm.block<3, 1>(0, 3));
+    const Eigen::Matrix3d r = scan.world_from_points.block<3, 3>(0, 0);
+    const Eigen::Vector3d t = scan.world_from_points.block<3, 1>(0, 3);
+    for (const auto& p : scan.used_points_cm) map_points.push_back((r * p.cast<double>() + t).cast<float>());
+  }
+  if (truth_cm && truth_cm->size() == result.scans.size()) {
+    // Reference trajectory expressed in the master scan's frame, as the registered one is.
+    const Pose align = result.scans.front().pose_cm * rigid_inverse(truth_cm->front());
+    for (const auto& pose : *truth_cm) reference_positions.push_back((align * pose).block<3, 1>(0, 3));
+  }
+  io::write_tum(out_dir / "trajectory.tum", trajectory, output.unit);
+  io::write_ply(out_dir / "map.ply", map_points, true, output.unit);
+
+  report::MapViewSettings view;
+  view.up_axis = output.up_axis;
+  view.title = output.title;
+  const report::MapViewInput input{map_points, positions, reference_positions};
+  report::write_top_view_png(out_dir / "top.png", input, view);
+  report::write_side_view_png(out_dir / "side.png", input, view);
+
+  nlohmann::json report;
+  report["unit"] = to_string(output.unit);
+  report["mode"] = to_string(settings.mode);
+  report["search"] = to_string(settings.icp.method);
+  report["backend"] = result.backend;
+  report["backend_note"] = result.backend_note;
+  report["notes"] = result.notes;
+  report["settings"] = {{"max_pair_dist_cm", settings.icp.max_pair_dist_cm},
+                        {"max_iterations", settings.icp.max_iterations},
+                        {"bucket_size", settings.tree.bucket_size},
+                        {"filter", settings.filter_enabled},
+                        {"median_window", settings.filter.median_window},
+                        {"outlier_threshold_cm", settings.filter.outlier_threshold_cm},
+                        {"min_point_spacing_cm", settings.filter.min_point_spacing_cm},
+                        {"slice_stride", settings.filter.slice_stride},
+                        {"min_overlap_pairs", settings.min_overlap_pairs}};
+  nlohmann::json scans = nlohmann::json::array();
+  for (const auto& s : result.scans) {
+    scans.push_back({{"name", s.name},
+                     {"pose", pose_json(s.pose_cm, unit_per_cm)},
+                     {"iterations", s.last_match.iterations()},
+                     {"approximate_iterations", s.last_match.approximate_iterations},
+                     {"exact_iterations", s.last_match.exact_iterations},
+                     {"pairs", s.last_match.pairs},
+                     {"rms", s.last_match.rms_cm * unit_per_cm},
+                     {"converged", s.registered && s.last_match.converged()},
+                     {"registered", s.registered},
+                     {"stop", s.registered ? to_string(s.last_match.stop) : s.failure},
+                     {"relaxation_matches", s.relaxation_matches},
+                     {"points_in", s.points_in},
+                     {"points_used", s.points_used},
+                     {"outliers_replaced", s.outliers_replaced}});
+  }
+  report["scans"] = scans;
+  report["icp_iterations"] = {{"step1", result.step1_icp_iterations}, {"step3", result.step3_icp_iterations}};
+  report["relaxation_matches"] = result.relaxation_matches;
+  const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  report["timings_s"] = {{"load", output.load_s},
+                         {"filter", result.times.filter_s},
+                         {"tree_build", result.times.tree_build_s},
+                         {"pairwise", result.times.pairwise_s},
+                         {"relaxation", result.times.relaxation_s},
+                         {"write", write_s}};
+  if (auto comparison = compare_with_truth(result, truth_cm)) {
+    report["truth"] = {{"odometry", errors_json(comparison->odometry, unit_per_cm)},
+                       {"registered", errors_json(comparison->registered, unit_per_cm)}};
+  }
+  const std::string text = report.dump(2) + "\n";
+  write_file_atomically(out_dir / "report.json", text);
+  return text;
+}
+
+}  // namespace minemap

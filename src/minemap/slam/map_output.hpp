@@ -1,0 +1,36 @@
+#pragma once
+// Writes what `minemap map` produces: per scan 3DTK-compatible `.frames` and `.pose`, the
+// trajectory as TUM, the merged reduced map as PLY, report.json, and the paper's Fig. 6 views
+// (top.png, side.png). Every file is written atomically (temp file + rename).
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "minemap/io/formats.hpp"
+#include "minemap/slam/survey_matching.hpp"
+
+namespace minemap {
+
+struct MapOutputSettings {
+  LengthUnit unit = LengthUnit::kCentimetre;  ///< the survey's unit: poses and map are written in it
+  int up_axis = 1;                            ///< 1 (y) for 3DTK frames, 2 (z) for right-handed ones
+  std::string title;                          ///< drawn on the pictures
+  double load_s = 0.0;                        ///< reading time, for the report
+};
+
+/// Pose errors before (odometry) and after registration, when the survey has reference poses.
+struct TruthComparison {
+  PoseErrors odometry;
+  PoseErrors registered;
+};
+
+std::optional<TruthComparison> compare_with_truth(const MappingResult& result,
+                                                  const std::optional<std::vector<Pose>>& truth_cm);
+
+/// Writes every output into `out_dir` (created if missing). Returns the report as JSON text.
+std::string write_map_outputs(const std::filesystem::path& out_dir, const MappingResult& result,
+                              const std::optional<std::vector<Pose>>& truth_cm, const MappingSettings& settings,
+                              const MapOutputSettings& output);
+
+}  // namespace minemap

@@ -1,0 +1,282 @@
+#include "minemap/slam/survey_matching.hpp"
+
+#include <algorithm>
+#include <deque>
+#include <set>
+#include <stdexcept>
+
+namespace minemap {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+/// Everything the matcher holds per scan: its prepared cloud and its current T_world_points.
+struct ScanState {
+  std::shared_ptr<const PreparedCloud> cloud;
+  Pose odometry = Pose::Identity();  ///< initial T_world_points
+  Pose pose = Pose::Identity();      ///< current T_world_points
+  Pose points_from_file = Pose::Identity();
+};
+
+class SurveyMatcher {
+ public:
+  SurveyMatcher(const std::vector<Scan>& scans, const MappingSettings& settings, const ProgressCallback& progress)
+      : scans_(scans), settings_(settings), progress_(progress) {}
+
+  MappingResult run() {
+    if (scans_.empty()) throw std::invalid_argument("the survey holds no scans");
+    auto choice = make_pairing_backend(settings_.backend);
+    backend_ = std::move(choice.backend);
+    result_.backend = backend_->name() + ": " + backend_->device_description();
+    result_.backend_note = choice.message;
+    prepare_all();
+    match_all();
+    return std::move(result_);
+  }
+
+ private:
+  void report(std::size_t done, const std::string& phase) {
+    if (progress_) progress_(done, scans_.size(), phase);
+  }
+
+  void prepare_all() {
+    states_.resize(scans_.size());
+    result_.scans.resize(scans_.size());
+    const Backend filter_backend = backend_->name() == "opencl" ? Backend::kOpenCl : Backend::kCpu;
+    for (std::size_t i = 0; i < scans_.size(); ++i) {
+      const Scan& scan = scans_[i];
+      ScanOutcome& outcome = result_.scans[i];
+      outcome.name = scan.name;
+      outcome.initial_pose_cm = scan.pose_cm;
+      outcome.pose_cm = scan.pose_cm;
+      outcome.points_in = scan.size();
+      outcome.frames.push_back({scan.pose_cm, 0});
+      auto start = Clock::now();
+      std::vector<Eigen::Vector3f> points;
+      if (scan.has_slices() && settings_.filter_enabled) {
+        std::string note;
+        SliceFilterResult filtered = filter_scan(scan, settings_.filter, filter_backend, &note);
+        if (!note.empty() && notes_seen_.insert(note).second) result_.notes.push_back(note);
+        outcome.outliers_replaced = filtered.outliers_replaced;
+        points = std::move(filtered.points_cm);
+      } else {
+        if (!scan.has_slices() && settings_.filter_enabled && !unstructured_noted_) {
+          result_.notes.push_back("scans without slice structure: slice filter skipped");
+          unstructured_noted_ = true;
+        }
+        points = thin_unstructured(scan, settings_.unstructured_point_stride);
+      }
+      result_.times.filter_s += seconds_since(start);
+      outcome.points_used = points.size();
+      start = Clock::now();
+      ScanState& state = states_[i];
+      outcome.used_points_cm = points;
+      state.cloud = backend_->prepare(std::move(points), settings_.tree);
+      state.odometry = scan.world_from_points();
+      state.pose = state.odometry;
+      state.points_from_file = rigid_inverse(scan.world_from_points()) * scan.pose_cm;
+      outcome.world_from_points = state.pose;
+      result_.times.tree_build_s += seconds_since(start);
+      report(i + 1, "filtering");
+    }
+  }
+
+  void set_pose(std::size_t i, const Pose& world_from_points, const IcpResult& match) {
+    states_[i].pose = world_from_points;
+    ScanOutcome& outcome = result_.scans[i];
+    outcome.pose_cm = world_from_points * states_[i].points_from_file;
+    outcome.world_from_points = world_from_points;
+    outcome.frames.push_back({outcome.pose_cm, 1});
+    outcome.last_match = match;
+    outcome.registered = true;
+    outcome.failure.clear();
+  }
+
+  void mark_failed(std::size_t i, const IcpResult& match) {
+    ScanOutcome& outcome = result_.scans[i];
+    outcome.registered = false;
+    outcome.last_match = match;
+    outcome.failure = std::string(to_string(match.stop)) + " (" + std::to_string(match.pairs) + " pairs)";
+  }
+
+  /// Scans among `candidates` whose world bounds come within the pair distance of scan i's.
+  std::vector<std::size_t> nearby(std::size_t i, std::size_t limit) const {
+    const float margin = settings_.icp.max_pair_dist_cm;
+    const Bounds3d bounds = world_bounds(states_[i].cloud->points(), states_[i].pose);
+    std::vector<std::size_t> out;
+    for (std::size_t j = 0; j < limit; ++j) {
+      if (j == i) continue;
+      if (bounds.intersects(world_bounds(states_[j].cloud->points(), states_[j].pose), margin)) out.push_back(j);
+    }
+    return out;
+  }
+
+  std::vector<WorldModel> models_of(const std::vector<std::size_t>& indices) const {
+    std::vector<WorldModel> models;
+    for (std::size_t j : indices) models.push_back({states_[j].cloud.get(), states_[j].pose});
+    return models;
+  }
+
+  /// Step 1 (and the pairwise mode): match scan i against scan i-1 from corrected odometry.
+  IcpResult match_pairwise(std::size_t i) {
+    const Pose odometry_step = rigid_inverse(states_[i - 1].odometry) * states_[i].odometry;
+    const Pose start = states_[i - 1].pose * odometry_step;
+    states_[i].pose = start;
+    const std::vector<WorldModel> models = models_of({i - 1});
+    const IcpResult match = register_icp(*backend_, *states_[i].cloud, start, models, settings_.icp);
+    result_.step1_icp_iterations += match.iterations();
+    if (match.ok()) {
+      set_pose(i, match.world_from_data, match);
+    } else {
+      result_.scans[i].pose_cm = start * states_[i].points_from_file;
+      result_.scans[i].world_from_points = start;
+      mark_failed(i, match);
+    }
+    return match;
+  }
+
+  void match_incremental(std::size_t i) {
+    const Pose odometry_step = rigid_inverse(states_[i - 1].odometry) * states_[i].odometry;
+    states_[i].pose = states_[i - 1].pose * odometry_step;
+    const auto models = models_of(nearby(i, i));  // the metascan: registered scans near the new one
+    const IcpResult match = register_icp(*backend_, *states_[i].cloud, states_[i].pose, models, settings_.icp);
+    result_.step1_icp_iterations += match.iterations();
+    if (match.ok()) {
+      set_pose(i, match.world_from_data, match);
+    } else {
+      result_.scans[i].pose_cm = states_[i].pose * states_[i].points_from_file;
+      result_.scans[i].world_from_points = states_[i].pose;
+      mark_failed(i, match);
+    }
+  }
+
+  /// Steps 2 and 3 after scan `newest` arrived: the queue-based relaxation over scans 0..newest.
+  void relax(std::size_t newest) {
+    std::deque<std::size_t> queue{newest};
+    std::vector<bool> queued(newest + 1, false);
+    queued[newest] = true;
+    const int cap = settings_.max_relaxation_matches_per_scan > 0 ? settings_.max_relaxation_matches_per_scan
+                                                                   : 4 * static_cast<int>(newest + 1);
+    int matches = 0;
+    while (!queue.empty() && matches < cap) {
+      const std::size_t current = queue.front();
+      queue.pop_front();
+      queued[current] = false;
+      if (current == 0) continue;  // the master scan is fixed
+      std::vector<std::size_t> neighbours;
+      for (std::size_t j : nearby(current, newest + 1)) {
+        const WorldModel model{states_[j].cloud.get(), states_[j].pose};
+        const std::size_t pairs = count_pairs(*backend_, *states_[current].cloud, states_[current].pose, model,
+                                              settings_.icp.max_pair_dist_cm);
+        if (pairs > static_cast<std::size_t>(settings_.min_overlap_pairs)) neighbours.push_back(j);
+      }
+      if (neighbours.empty()) continue;
+      const Pose before = states_[current].pose;
+      const auto models = models_of(neighbours);
+      const IcpResult match = register_icp(*backend_, *states_[current].cloud, before, models, settings_.icp);
+      ++matches;
+      ++result_.relaxation_matches;
+      ++result_.scans[current].relaxation_matches;
+      result_.step3_icp_iterations += match.iterations();
+      if (!match.ok()) continue;  // keep the pose it had; a failed relaxation step moves nothing
+      set_pose(current, match.world_from_data, match);
+      const Pose change = rigid_inverse(before) * match.world_from_data;
+      const bool moved = translation_norm(change) > settings_.moved_translation_cm ||
+                         rotation_angle_deg(change) > settings_.moved_rotation_deg;
+      if (!moved) continue;
+      for (std::size_t j : neighbours) {
+        if (j != 0 && !queued[j]) {
+          queue.push_back(j);
+          queued[j] = true;
+        }
+      }
+    }
+  }
+
+  void match_all() {
+    for (std::size_t i = 1; i < scans_.size(); ++i) {
+      auto start = Clock::now();
+      switch (settings_.mode) {
+        case MatchingMode::kPairwise: match_pairwise(i); break;
+        case MatchingMode::kIncremental: match_incremental(i); break;
+        case MatchingMode::kSimultaneous: match_pairwise(i); break;
+      }
+      result_.times.pairwise_s += seconds_since(start);
+      if (settings_.mode == MatchingMode::kSimultaneous) {
+        start = Clock::now();
+        relax(i);
+        result_.times.relaxation_s += seconds_since(start);
+      }
+      report(i + 1, to_string(settings_.mode));
+    }
+  }
+
+  const std::vector<Scan>& scans_;
+  const MappingSettings& settings_;
+  const ProgressCallback& progress_;
+  std::unique_ptr<PairingBackend> backend_;
+  std::vector<ScanState> states_;
+  MappingResult result_;
+  std::set<std::string> notes_seen_;
+  bool unstructured_noted_ = false;
+};
+
+}  // namespace
+
+const char* to_string(MatchingMode mode) {
+  switch (mode) {
+    case MatchingMode::kPairwise: return "pairwise";
+    case MatchingMode::kIncremental: return "incremental";
+    case MatchingMode::kSimultaneous: return "simultaneous";
+  }
+  return "?";
+}
+
+MatchingMode parse_matching_mode(const std::string& text) {
+  if (text == "pairwise") return MatchingMode::kPairwise;
+  if (text == "incremental") return MatchingMode::kIncremental;
+  if (text == "simultaneous") return MatchingMode::kSimultaneous;
+  throw std::invalid_argument("unknown mode '" + text + "' (expected pairwise, incremental or simultaneous)");
+}
+
+bool MappingResult::all_registered() const {
+  return std::all_of(scans.begin(), scans.end(), [](const ScanOutcome& s) { return s.registered; });
+}
+
+MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings,
+                         const ProgressCallback& progress) {
+  settings.filter.validate();
+  return SurveyMatcher(scans, settings, progress).run();
+}
+
+PoseErrors pose_errors(const std::vector<Pose>& estimated, const std::vector<Pose>& reference) {
+  if (estimated.size() != reference.size() || estimated.empty()) {
+    throw std::invalid_argument("pose_errors: estimated and reference differ in count or are empty");
+  }
+  PoseErrors errors;
+  const Pose est0 = rigid_inverse(estimated.front());
+  const Pose ref0 = rigid_inverse(reference.front());
+  const std::size_t n = estimated.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Pose difference = rigid_inverse(ref0 * reference[i]) * (est0 * estimated[i]);
+    const double t = translation_norm(difference), r = rotation_angle_deg(difference);
+    errors.mean_translation_cm += t / static_cast<double>(n);
+    errors.mean_rotation_deg += r / static_cast<double>(n);
+    errors.max_translation_cm = std::max(errors.max_translation_cm, t);
+    errors.max_rotation_deg = std::max(errors.max_rotation_deg, r);
+    if (i == 0) continue;
+    const Pose relative_ref = rigid_inverse(reference[i - 1]) * reference[i];
+    const Pose relative_est = rigid_inverse(estimated[i - 1]) * estimated[i];
+    const Pose relative_difference = rigid_inverse(relative_ref) * relative_est;
+    const double rt = translation_norm(relative_difference), rr = rotation_angle_deg(relative_difference);
+    errors.mean_relative_translation_cm += rt / static_cast<double>(n - 1);
+    errors.mean_relative_rotation_deg += rr / static_cast<double>(n - 1);
+    errors.max_relative_translation_cm = std::max(errors.max_relative_translation_cm, rt);
+    errors.max_relative_rotation_deg = std::max(errors.max_relative_rotation_deg, rr);
+    errors.path_length_cm += translation_norm(relative_ref);
+  }
+  return errors;
+}
+
+}  // namespace minemap

@@ -1,0 +1,99 @@
+#pragma once
+// Matching many scans (paper, section IV.B): pairwise, incremental (against the metascan of all
+// registered scans) and simultaneous matching, the queue-based global relaxation:
+//  1. a new scan is matched pairwise, starting from odometry corrected by the previous scan's
+//     correction;
+//  2. a queue is initialised with the new scan;
+//  3. until the queue is empty: the front scan (unless it is the master, scan 0, which is fixed) is
+//     matched against the union of all scans overlapping it (overlap: more than 250 point pairs);
+//     if that moved it, each neighbour not in the queue is appended.
+// The union is searched through each neighbour's own kd-tree (no tree of the union is rebuilt);
+// neighbour candidates are prefiltered by world bounds, so finding them costs one pairing pass per
+// nearby scan, not an ICP run per scan pair.
+#include <chrono>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "minemap/core/pose.hpp"
+#include "minemap/core/scan.hpp"
+#include "minemap/filter/slice_filter.hpp"
+#include "minemap/io/formats.hpp"
+#include "minemap/registration/icp.hpp"
+#include "minemap/search/pairing.hpp"
+
+namespace minemap {
+
+enum class MatchingMode { kPairwise, kIncremental, kSimultaneous };
+const char* to_string(MatchingMode mode);
+MatchingMode parse_matching_mode(const std::string& text);  ///< "pairwise", "incremental", "simultaneous"
+
+struct MappingSettings {
+  MatchingMode mode = MatchingMode::kSimultaneous;
+  Backend backend = Backend::kAuto;
+  bool filter_enabled = true;             ///< the slice filter (scans with slices)
+  SliceFilterSettings filter;
+  int unstructured_point_stride = 1;      ///< scans without slices: keep every n-th point
+  KdTreeSettings tree;
+  IcpSettings icp;
+  int min_overlap_pairs = 250;            ///< the paper: overlap iff more than 250 pairs
+  double moved_translation_cm = 0.5;      ///< step 3c: a match "moved" the scan beyond this...
+  double moved_rotation_deg = 0.02;       ///< ...or this
+  int max_relaxation_matches_per_scan = 0;  ///< cap on step-3 matches after one new scan; 0 = 4 x scans so far
+};
+
+/// How one scan ended up.
+struct ScanOutcome {
+  std::string name;
+  Pose pose_cm = Pose::Identity();          ///< final T_world_file (cm)
+  Pose initial_pose_cm = Pose::Identity();  ///< the odometry pose it started from
+  std::vector<io::FrameLine> frames;        ///< every pose it took, 3DTK .frames style (last = final)
+  IcpResult last_match;                     ///< the last ICP run that moved it (pairwise or relaxation)
+  int relaxation_matches = 0;               ///< step-3 matches of this scan
+  std::size_t points_in = 0;                ///< points read
+  std::size_t points_used = 0;              ///< points after filtering, used for matching
+  std::size_t outliers_replaced = 0;
+  std::vector<Eigen::Vector3f> used_points_cm;  ///< the filtered points, in the points frame
+  Pose world_from_points = Pose::Identity();    ///< final T_world_points (places used_points_cm)
+  bool registered = true;                   ///< false: no registration succeeded; pose from odometry
+  std::string failure;                      ///< why, when !registered
+};
+
+struct StageTimes {
+  double filter_s = 0, tree_build_s = 0, pairwise_s = 0, relaxation_s = 0;
+};
+
+struct MappingResult {
+  std::vector<ScanOutcome> scans;
+  std::string backend;  ///< "cpu" / "opencl" + device
+  std::string backend_note;
+  std::vector<std::string> notes;  ///< fallbacks, skipped filters
+  StageTimes times;
+  int step1_icp_iterations = 0;  ///< Table I: ICP iterations of the pairwise step
+  int step3_icp_iterations = 0;  ///< Table I: ICP iterations of the relaxation
+  int relaxation_matches = 0;
+  bool all_registered() const;
+};
+
+/// Reports progress: scans done of total, and a short phase name.
+using ProgressCallback = std::function<void(std::size_t done, std::size_t total, const std::string& phase)>;
+
+/// Registers `scans` (pose_cm = odometry / initial guess; scan 0 is the master and stays fixed).
+/// Throws std::invalid_argument on an empty survey. Registration failures do not throw: the scan
+/// keeps its odometry-based pose, `registered` is false and `failure` says why.
+MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings,
+                         const ProgressCallback& progress = {});
+
+/// Pose errors of `estimated` against `reference`, both expressed relative to scan 0 (the master
+/// fixes the frame): translation in cm, rotation in degrees.
+struct PoseErrors {
+  double mean_translation_cm = 0, max_translation_cm = 0;
+  double mean_rotation_deg = 0, max_rotation_deg = 0;
+  double mean_relative_translation_cm = 0, max_relative_translation_cm = 0;  ///< consecutive pairs
+  double mean_relative_rotation_deg = 0, max_relative_rotation_deg = 0;
+  double path_length_cm = 0;  ///< along the reference
+};
+PoseErrors pose_errors(const std::vector<Pose>& estimated, const std::vector<Pose>& reference);
+
+}  // namespace minemap
