@@ -38,6 +38,8 @@ struct MapOptions {
   bool no_filter = false;
   float max_pair_dist_cm = 25.0f;
   int max_iterations = 100;
+  double min_step_cm = minemap::IcpSettings{}.min_translation_step_cm;
+  double min_step_deg = minemap::IcpSettings{}.min_rotation_step_deg;
   std::string unit;  // empty: the format's default
   int threads = 0;
   int bucket_size = 10;
@@ -110,6 +112,8 @@ int run_map(const MapOptions& options) {
   settings.filter_enabled = !options.no_filter;
   settings.icp.max_pair_dist_cm = options.max_pair_dist_cm;
   settings.icp.max_iterations = options.max_iterations;
+  settings.icp.min_translation_step_cm = options.min_step_cm;
+  settings.icp.min_rotation_step_deg = options.min_step_deg;
   settings.tree.bucket_size = options.bucket_size;
   settings.filter.median_window = options.median_window;
   settings.filter.outlier_threshold_cm = options.outlier_threshold_cm;
@@ -200,6 +204,9 @@ int main(int argc, char** argv) {
   map_cmd->add_flag("--no-filter", map.no_filter, "Skip the slice filter (median + reduction + every 3rd slice)");
   map_cmd->add_option("--max-pair-dist-cm", map.max_pair_dist_cm, "Maximum point-pair distance")->capture_default_str();
   map_cmd->add_option("--max-iterations", map.max_iterations, "ICP iteration cap")->capture_default_str();
+  map_cmd->add_option("--min-step-cm", map.min_step_cm, "ICP converged: a step moves less than this...")
+      ->capture_default_str();
+  map_cmd->add_option("--min-step-deg", map.min_step_deg, "...and turns less than this")->capture_default_str();
   map_cmd->add_option("--unit", map.unit, "Unit of the survey files: m or cm (default: cm for uos, m otherwise)");
   map_cmd->add_option("--bucket-size", map.bucket_size, "kd-tree bucket size")->capture_default_str();
   map_cmd->add_option("--median-window", map.median_window, "Median filter window (points)")->capture_default_str();

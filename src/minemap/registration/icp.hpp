@@ -16,8 +16,8 @@ struct IcpSettings {
   SearchMethod method = SearchMethod::kApproximate;
   float max_pair_dist_cm = 25.0f;          ///< 3DTK's default
   int max_iterations = 100;                ///< approximate and exact together
-  double min_translation_step_cm = 0.001;  ///< converged when one iteration moves less than this...
-  double min_rotation_step_deg = 0.0001;   ///< ...and turns less than this
+  double min_translation_step_cm = 0.01;   ///< converged when one iteration moves less than this...
+  double min_rotation_step_deg = 0.001;    ///< ...and turns less than this
   int min_pairs = 250;                     ///< fewer pairs: no overlap, registration fails
 };
 

@@ -1,6 +1,7 @@
 #include "minemap/slam/survey_matching.hpp"
 
 #include <algorithm>
+#include <array>
 #include <deque>
 #include <set>
 #include <stdexcept>
@@ -100,15 +101,28 @@ class SurveyMatcher {
     outcome.failure = std::string(to_string(match.stop)) + " (" + std::to_string(match.pairs) + " pairs)";
   }
 
-  /// Scans among `candidates` whose world bounds come within the pair distance of scan i's.
+  /// World bounds of scan i at its current pose, from its kd-tree's local box (8 corners).
+  Bounds3d bounds_of(std::size_t i) const {
+    const KdTree& tree = states_[i].cloud->tree();
+    if (tree.empty()) return {};
+    const std::array<Eigen::Vector3f, 2> corners = {tree.bounds_min(), tree.bounds_max()};
+    return world_bounds(corners, states_[i].pose);
+  }
+
+  /// Scans 0..limit-1 (not i) whose world bounds come within the pair distance of scan i's,
+  /// closest scan position first: searching near, dense scans first tightens the pair bound early.
   std::vector<std::size_t> nearby(std::size_t i, std::size_t limit) const {
     const float margin = settings_.icp.max_pair_dist_cm;
-    const Bounds3d bounds = world_bounds(states_[i].cloud->points(), states_[i].pose);
-    std::vector<std::size_t> out;
+    const Bounds3d bounds = bounds_of(i);
+    std::vector<std::pair<double, std::size_t>> found;
     for (std::size_t j = 0; j < limit; ++j) {
-      if (j == i) continue;
-      if (bounds.intersects(world_bounds(states_[j].cloud->points(), states_[j].pose), margin)) out.push_back(j);
+      if (j == i || !bounds.intersects(bounds_of(j), margin)) continue;
+      const double distance = (states_[j].pose.block<3, 1>(0, 3) - states_[i].pose.block<3, 1>(0, 3)).norm();
+      found.emplace_back(distance, j);
     }
+    std::sort(found.begin(), found.end());
+    std::vector<std::size_t> out;
+    for (const auto& [distance, j] : found) out.push_back(j);
     return out;
   }
 

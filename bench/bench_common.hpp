@@ -1,0 +1,43 @@
+#pragma once
+// Inputs shared by the benchmark programs: the simulated paper-size scans and the shared real scans.
+#include <filesystem>
+#include <memory>
+#include <vector>
+
+#include "minemap/filter/slice_filter.hpp"
+#include "minemap/io/formats.hpp"
+#include "minemap/sim/mine_simulator.hpp"
+
+namespace minemap::bench {
+
+/// Two consecutive simulated mine scans of the paper's size (361 x 341), seed 1, with true poses.
+struct SimulatedPair {
+  Scan model, data;
+  Pose true_world_from_model, true_world_from_data;
+};
+inline const SimulatedPair& simulated_pair() {
+  static const SimulatedPair pair = [] {
+    sim::SimulationSettings settings;
+    settings.mine.scans = 2;
+    settings.mine.seed = 1;
+    auto survey = sim::simulate_mine_survey(settings);
+    return SimulatedPair{survey.scans[0], survey.scans[1], survey.truth_cm[0], survey.truth_cm[1]};
+  }();
+  return pair;
+}
+
+inline std::filesystem::path shared_data() { return MINEMAP_SHARED_DATA_DIR; }
+
+/// ../shared/data/fast_gicp_pair: target, source (about 69k points each), cm.
+struct RealPair {
+  Scan target, source;
+};
+inline const RealPair& fast_gicp_pair() {
+  static const RealPair pair = [] {
+    const auto dir = shared_data() / "fast_gicp_pair";
+    return RealPair{io::read_pcd(dir / "251370668.pcd"), io::read_pcd(dir / "251371071.pcd")};
+  }();
+  return pair;
+}
+
+}  // namespace minemap::bench
