@@ -15,10 +15,18 @@ std::optional<SliceFilterResult> filter_scan_opencl(const Scan& scan, const Slic
   SliceFilterResult result;
   result.backend = "opencl";
   result.points_in = scan.size();
-  if (!scan.has_slices() || scan.empty()) {
+  if (!scan.has_slices()) {
     result.points_cm = scan.points_cm;
     result.points_in_kept_slices = scan.size();
     result.slice_offsets = {0, static_cast<std::uint32_t>(scan.size())};
+    return result;
+  }
+  if (scan.empty()) {
+    // Slices without points (no returns): one empty output slice per kept slice, as on the CPU;
+    // nothing to launch (OpenCL rejects zero-size buffers).
+    const std::size_t kept = (scan.num_slices() + static_cast<std::size_t>(settings.slice_stride) - 1) /
+                             static_cast<std::size_t>(settings.slice_stride);
+    result.slice_offsets.assign(kept + 1, 0);
     return result;
   }
   try {

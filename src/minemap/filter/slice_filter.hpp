@@ -41,7 +41,8 @@ struct SliceFilterResult {
   std::string backend;                        ///< "cpu" or "opencl"
 };
 
-/// CPU reference. A scan without slices is returned unchanged (with a note in `backend`).
+/// CPU reference. A scan without slices is returned unchanged (the dispatch `filter_scan` says so
+/// in its note).
 SliceFilterResult filter_scan_cpu(const Scan& scan, const SliceFilterSettings& settings);
 
 enum class Backend;

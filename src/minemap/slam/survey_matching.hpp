@@ -38,8 +38,8 @@ struct MappingSettings {
   KdTreeSettings tree;
   IcpSettings icp;
   int min_overlap_pairs = 250;            ///< the paper: overlap iff more than 250 pairs
-  double moved_translation_cm = 0.5;      ///< step 3c: a match "moved" the scan beyond this...
-  double moved_rotation_deg = 0.02;       ///< ...or this
+  double moved_translation_cm = 2.0;      ///< step 3c: a match "moved" the scan beyond this...
+  double moved_rotation_deg = 0.1;        ///< ...or this
   int max_relaxation_matches_per_scan = 0;  ///< cap on step-3 matches after one new scan; 0 = 4 x scans so far
 };
 
