@@ -1,6 +1,7 @@
 #pragma once
 // Inputs shared by the benchmark programs: the simulated paper-size scans and the shared real scans.
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <vector>
 

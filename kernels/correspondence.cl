@@ -2,8 +2,9 @@
 // Mirrors src/minemap/search/pairing_math.hpp: same traversal order, same strict '<' ties.
 //
 // Tree layout (uploaded unchanged from minemap::KdTree):
-//   nodes  int4 {axis (-1 = leaf), a, b, split bits}; inner: a/b = children; leaf: a = first point,
-//          b = count, split bits = leaf index
+//   nodes  int8 {axis (-1 = leaf), a, b, split bits, left_max, right_min, 0, 0}; inner: a/b =
+//          children, left_max/right_min = the children's extents along the axis (float bits);
+//          leaf: a = first point, b = count, split bits = leaf index
 //   points float4 {x, y, z, original index bits}
 //   means  float4 {x, y, z, count} per leaf
 
@@ -24,19 +25,19 @@ inline float mm_squared_distance_to_box(float3 q, float4 lo, float4 hi) {
 
 // One query against one model: updates best (squared distance bound) and the hit, returns 1 when
 // a closer model point was found. `hit_position` is in the MODEL frame.
-inline int mm_search_model(float3 q, __global const int4* nodes, __global const float4* tree_points,
+inline int mm_search_model(float3 q, __global const int8* nodes, __global const float4* tree_points,
                            __global const float4* leaf_means, const int method, float* best, int* hit_index,
                            float3* hit_position) {
   int found = 0;
   if (method == MM_APPROXIMATE) {
     int node = 0;
-    int4 n = nodes[0];
-    while (n.x >= 0) {
-      const float split = as_float(n.w);
-      node = ((n.x == 0 ? q.x : (n.x == 1 ? q.y : q.z)) < split) ? n.y : n.z;
+    int8 n = nodes[0];
+    while (n.s0 >= 0) {
+      const float split = as_float(n.s3);
+      node = ((n.s0 == 0 ? q.x : (n.s0 == 1 ? q.y : q.z)) < split) ? n.s1 : n.s2;
       n = nodes[node];
     }
-    const float4 mean = leaf_means[n.w];
+    const float4 mean = leaf_means[n.s3];
     const float d = mm_squared_distance(q, mean.xyz);
     if (d < *best) {
       *best = d;
@@ -50,26 +51,37 @@ inline int mm_search_model(float3 q, __global const int4* nodes, __global const 
     // Unreachable from the tree search path: brute force has its own tiled kernel below.
     return 0;
   }
+  // Exact search with incremental cell distances (see exact_nearest in pairing_math.hpp).
   int stack_node[MM_STACK_DEPTH];
-  float stack_plane[MM_STACK_DEPTH];
+  float stack_bound[MM_STACK_DEPTH];
+  float3 stack_offset[MM_STACK_DEPTH];
   int top = 0;
   int node = 0;
+  float lower_bound = 0.0f;
+  float3 offset = (float3)(0.0f);
   for (;;) {
-    int4 n = nodes[node];
-    while (n.x >= 0) {
-      const float diff = (n.x == 0 ? q.x : (n.x == 1 ? q.y : q.z)) - as_float(n.w);
-      const int near_child = diff < 0.0f ? n.y : n.z;
-      const int far_child = diff < 0.0f ? n.z : n.y;
-      const float plane = diff * diff;
-      if (plane < *best) {
-        stack_node[top] = far_child;
-        stack_plane[top] = plane;
+    int8 n = nodes[node];
+    while (n.s0 >= 0) {
+      const int axis = n.s0;
+      const float v = axis == 0 ? q.x : (axis == 1 ? q.y : q.z);
+      const int go_left = v < as_float(n.s3);
+      const float gap = go_left ? as_float(n.s5) - v : v - as_float(n.s4);
+      const float axis_offset = axis == 0 ? offset.x : (axis == 1 ? offset.y : offset.z);
+      const float far_bound = (lower_bound - axis_offset * axis_offset) + gap * gap;
+      if (far_bound < *best) {
+        stack_node[top] = go_left ? n.s2 : n.s1;
+        stack_bound[top] = far_bound;
+        float3 far_offset = offset;
+        if (axis == 0) far_offset.x = gap;
+        else if (axis == 1) far_offset.y = gap;
+        else far_offset.z = gap;
+        stack_offset[top] = far_offset;
         ++top;
       }
-      node = near_child;
+      node = go_left ? n.s1 : n.s2;
       n = nodes[node];
     }
-    for (int i = n.y, end = n.y + n.z; i < end; ++i) {
+    for (int i = n.s1, end = n.s1 + n.s2; i < end; ++i) {
       const float4 p = tree_points[i];
       const float d = mm_squared_distance(p.xyz, q);
       if (d < *best) {
@@ -82,16 +94,18 @@ inline int mm_search_model(float3 q, __global const int4* nodes, __global const 
     for (;;) {
       if (top == 0) return found;
       --top;
-      if (stack_plane[top] < *best) break;
+      if (stack_bound[top] < *best) break;
     }
     node = stack_node[top];
+    lower_bound = stack_bound[top];
+    offset = stack_offset[top];
   }
 }
 
 // One work-item per data point. Keeps, across launches for several models (the union of a scan's
 // neighbours), the closest pair so far: best_pair.xyz = model point in the DATA frame,
 // best_pair.w = squared distance or -1; best_ref = (model id, original point index or -1).
-__kernel void nearest_in_tree(__global const float4* data, const int data_count, __global const int4* nodes,
+__kernel void nearest_in_tree(__global const float4* data, const int data_count, __global const int8* nodes,
                               __global const float4* tree_points, __global const float4* leaf_means,
                               const float4 box_lo, const float4 box_hi, const float4 to_model0,
                               const float4 to_model1, const float4 to_model2, const float4 to_data0,

@@ -30,9 +30,11 @@ IcpResult register_icp(PairingBackend& backend, const PreparedCloud& data, const
   IcpResult result;
   result.world_from_data = world_from_data;
   Pose current = world_from_data;
-  const PairingSettings pairing{settings.max_pair_dist_cm};
+  PairingSettings pairing{settings.max_pair_dist_cm};
   SearchMethod method = settings.method;
   const bool scheduled = settings.method == SearchMethod::kApproximate;
+  const bool refine = settings.refine_max_pair_dist_cm > 0.0f && settings.refine_max_pair_dist_cm < settings.max_pair_dist_cm;
+  bool refining = false;
   double previous_rms = std::numeric_limits<double>::infinity();
 
   for (int iteration = 0; iteration < settings.max_iterations; ++iteration) {
@@ -41,6 +43,7 @@ IcpResult register_icp(PairingBackend& backend, const PreparedCloud& data, const
     if (sums.count < std::max(3, settings.min_pairs)) {
       result.stop = IcpStop::kTooFewPairs;
       result.pairs = static_cast<std::size_t>(sums.count);
+      result.world_from_data = world_from_data;
       return result;
     }
     const double rms = sums.rms_cm();
@@ -55,28 +58,35 @@ IcpResult register_icp(PairingBackend& backend, const PreparedCloud& data, const
     const auto step = horn_transform(sums);
     if (!step || !is_valid_rigid(*step, 1e-6)) {
       result.stop = IcpStop::kNumericFailure;
+      result.world_from_data = world_from_data;
       return result;
     }
     current = current * *step;
     (method == SearchMethod::kApproximate ? result.approximate_iterations : result.exact_iterations) += 1;
+    if (refining) ++result.refine_iterations;
     result.pairs = static_cast<std::size_t>(sums.count);
     result.rms_cm = rms;
     if (!current.allFinite()) {
       result.stop = IcpStop::kNumericFailure;
+      result.world_from_data = world_from_data;
       return result;
     }
     const bool small_step = translation_norm(*step) < settings.min_translation_step_cm &&
                             rotation_angle_deg(*step) < settings.min_rotation_step_deg;
-    if (small_step) {
-      if (method == SearchMethod::kApproximate && scheduled) {
-        method = SearchMethod::kExact;  // approximate search settled: finish with exact pairs
-        previous_rms = std::numeric_limits<double>::infinity();
-        continue;
-      }
-      result.world_from_data = orthonormalised(current);
-      result.stop = IcpStop::kConverged;
-      return result;
+    if (!small_step) continue;
+    if (method == SearchMethod::kApproximate && scheduled) {
+      method = SearchMethod::kExact;  // approximate search settled: finish with exact pairs
+      previous_rms = std::numeric_limits<double>::infinity();
+      continue;
     }
+    if (refine && !refining) {
+      refining = true;  // converged at the wide bound: tighten it and converge again
+      pairing.max_pair_dist_cm = settings.refine_max_pair_dist_cm;
+      continue;
+    }
+    result.world_from_data = orthonormalised(current);
+    result.stop = IcpStop::kConverged;
+    return result;
   }
   result.world_from_data = orthonormalised(current);
   result.stop = IcpStop::kMaxIterations;

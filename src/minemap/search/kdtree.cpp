@@ -15,7 +15,8 @@ KdTree::KdTree(std::span<const Eigen::Vector3f> points, const KdTreeSettings& se
   }
   if (points_.empty()) return;
   nodes_.reserve(2 * (points_.size() / static_cast<std::size_t>(settings_.bucket_size) + 1));
-  build(0, static_cast<std::int32_t>(points_.size()), 1);
+  float lo[3], hi[3];
+  build(0, static_cast<std::int32_t>(points_.size()), 1, lo, hi);
   bounds_min_ = bounds_max_ = points[0];
   for (const auto& p : points) {
     bounds_min_ = bounds_min_.cwiseMin(p);
@@ -23,13 +24,14 @@ KdTree::KdTree(std::span<const Eigen::Vector3f> points, const KdTreeSettings& se
   }
 }
 
-std::int32_t KdTree::build(std::int32_t begin, std::int32_t end, int depth) {
+std::int32_t KdTree::build(std::int32_t begin, std::int32_t end, int depth, float lo[3], float hi[3]) {
   depth_ = std::max(depth_, depth);
   const auto node_index = static_cast<std::int32_t>(nodes_.size());
   nodes_.emplace_back();
 
-  float lo[3] = {points_[begin].x, points_[begin].y, points_[begin].z};
-  float hi[3] = {lo[0], lo[1], lo[2]};
+  lo[0] = hi[0] = points_[begin].x;
+  lo[1] = hi[1] = points_[begin].y;
+  lo[2] = hi[2] = points_[begin].z;
   for (std::int32_t i = begin + 1; i < end; ++i) {
     const float c[3] = {points_[i].x, points_[i].y, points_[i].z};
     for (int d = 0; d < 3; ++d) {
@@ -70,9 +72,16 @@ std::int32_t KdTree::build(std::int32_t begin, std::int32_t end, int depth) {
     nodes_[node_index] = {KdNode::kLeaf, begin, end - begin, leaf_index};
     return node_index;
   }
-  const std::int32_t left = build(begin, middle, depth + 1);
-  const std::int32_t right = build(middle, end, depth + 1);
-  nodes_[node_index] = {axis, left, right, std::bit_cast<std::int32_t>(split)};
+  float left_lo[3], left_hi[3], right_lo[3], right_hi[3];
+  const std::int32_t left = build(begin, middle, depth + 1, left_lo, left_hi);
+  const std::int32_t right = build(middle, end, depth + 1, right_lo, right_hi);
+  KdNode& node = nodes_[node_index];
+  node.axis = axis;
+  node.a = left;
+  node.b = right;
+  node.split_bits = std::bit_cast<std::int32_t>(split);
+  node.left_max = left_hi[axis];
+  node.right_min = right_lo[axis];
   return node_index;
 }
 

@@ -18,8 +18,10 @@ struct KdTreeSettings {
   int bucket_size = 10;  ///< points per terminal bucket (paper: 10; Fig. 5 sweeps 1..100)
 };
 
-/// 16 bytes, laid out as OpenCL's int4 {axis, a, b, split bits}.
-/// Inner node: axis in 0..2, a = left child, b = right child, split = cut value (cm).
+/// 32 bytes, laid out as OpenCL's int4 {axis, a, b, split bits} + float4 {left_max, right_min, 0, 0}.
+/// Inner node: axis in 0..2, a = left child, b = right child, split = cut value (cm); left_max /
+/// right_min = the extent of the children's points along the axis (the gap between them lets the
+/// exact search prune more than the cut plane alone).
 /// Leaf: axis = kLeaf, a = first point in `points`, b = count, split bits = leaf index (int).
 struct KdNode {
   static constexpr std::int32_t kLeaf = -1;
@@ -27,8 +29,11 @@ struct KdNode {
   std::int32_t a = 0;
   std::int32_t b = 0;
   std::int32_t split_bits = 0;  ///< float cut value (inner) or int leaf index (leaf), bit-cast
+  float left_max = 0.0f;
+  float right_min = 0.0f;
+  float unused[2] = {0.0f, 0.0f};
 };
-static_assert(sizeof(KdNode) == 16);
+static_assert(sizeof(KdNode) == 32);
 
 /// Point stored in the tree: xyz in cm, w = the point's index in the input cloud (int bits).
 struct KdPoint {
@@ -56,7 +61,8 @@ class KdTree {
   int bucket_size() const { return settings_.bucket_size; }
 
  private:
-  std::int32_t build(std::int32_t begin, std::int32_t end, int depth);
+  /// Builds the subtree over points_[begin, end); returns its node and the points' bounds.
+  std::int32_t build(std::int32_t begin, std::int32_t end, int depth, float lo[3], float hi[3]);
 
   KdTreeSettings settings_;
   std::vector<KdNode> nodes_;

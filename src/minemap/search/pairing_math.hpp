@@ -46,26 +46,40 @@ inline float squared_distance_to_bounds(const KdTree& tree, const Eigen::Vector3
 }
 
 /// Exact nearest neighbour with backtracking; only points closer than sqrt(best) are accepted,
-/// so `best` doubles as the maximum pair distance bound (radius-bounded descent).
+/// so `best` doubles as the maximum pair distance bound (radius-bounded descent). A subtree is
+/// visited only if a lower bound of its distance beats `best`: the bound adds up, per axis, the
+/// squared gap between the query and the children's actual extents (nanoflann's incremental
+/// distance, with the gap between the two children instead of the bare cut plane).
 inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& best, std::int32_t& best_point) {
   struct Pending {
     std::int32_t node;
-    float plane_squared_distance;
+    float lower_bound;
+    float offset[3];
   };
   Pending stack[kMaxKdDepth];
   int top = 0;
   const KdNode* nodes = tree.nodes().data();
   const KdPoint* points = tree.points().data();
   std::int32_t node = 0;
+  float lower_bound = 0.0f;
+  float offset[3] = {0.0f, 0.0f, 0.0f};
   for (;;) {
     while (nodes[node].axis != KdNode::kLeaf) {
       const KdNode& n = nodes[node];
-      const float diff = q[n.axis] - std::bit_cast<float>(n.split_bits);
-      const std::int32_t near_child = diff < 0.0f ? n.a : n.b;
-      const std::int32_t far_child = diff < 0.0f ? n.b : n.a;
-      const float plane = diff * diff;
-      if (plane < best) stack[top++] = {far_child, plane};
-      node = near_child;
+      const float v = q[n.axis];
+      const bool go_left = v < std::bit_cast<float>(n.split_bits);
+      const float gap = go_left ? n.right_min - v : v - n.left_max;
+      const float far_bound = (lower_bound - offset[n.axis] * offset[n.axis]) + gap * gap;
+      if (far_bound < best) {
+        Pending& pending = stack[top++];
+        pending.node = go_left ? n.b : n.a;
+        pending.lower_bound = far_bound;
+        pending.offset[0] = offset[0];
+        pending.offset[1] = offset[1];
+        pending.offset[2] = offset[2];
+        pending.offset[n.axis] = gap;
+      }
+      node = go_left ? n.a : n.b;
     }
     const KdNode& leaf = nodes[node];
     for (std::int32_t i = leaf.a, end = leaf.a + leaf.b; i < end; ++i) {
@@ -75,12 +89,16 @@ inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& b
         best_point = i;
       }
     }
-    // Backtrack: only buckets whose cut plane lies inside the current ball can hold a closer point.
     do {
       if (top == 0) return;
       --top;
-    } while (stack[top].plane_squared_distance >= best);
-    node = stack[top].node;
+    } while (stack[top].lower_bound >= best);
+    const Pending& next = stack[top];
+    node = next.node;
+    lower_bound = next.lower_bound;
+    offset[0] = next.offset[0];
+    offset[1] = next.offset[1];
+    offset[2] = next.offset[2];
   }
 }
 

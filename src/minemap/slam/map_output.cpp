@@ -89,6 +89,7 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
   report["backend_note"] = result.backend_note;
   report["notes"] = result.notes;
   report["settings"] = {{"max_pair_dist_cm", settings.icp.max_pair_dist_cm},
+                        {"refine_max_pair_dist_cm", settings.icp.refine_max_pair_dist_cm},
                         {"max_iterations", settings.icp.max_iterations},
                         {"bucket_size", settings.tree.bucket_size},
                         {"filter", settings.filter_enabled},

@@ -36,7 +36,11 @@ struct MappingSettings {
   SliceFilterSettings filter;
   int unstructured_point_stride = 1;      ///< scans without slices: keep every n-th point
   KdTreeSettings tree;
-  IcpSettings icp;
+  IcpSettings icp = [] {
+    IcpSettings defaults;
+    defaults.refine_max_pair_dist_cm = 10.0f;  // coarse-to-fine: 25 cm, then 10 cm (see IcpSettings)
+    return defaults;
+  }();
   int min_overlap_pairs = 250;            ///< the paper: overlap iff more than 250 pairs
   double moved_translation_cm = 2.0;      ///< step 3c: a match "moved" the scan beyond this...
   double moved_rotation_deg = 0.1;        ///< ...or this
