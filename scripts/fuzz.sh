@@ -46,9 +46,10 @@ done
 
 echo "== building ${#names[@]} fuzz targets in $build_dir ($cxx, address+undefined)"
 # RelWithDebInfo: optimised like the real readers, with line numbers in sanitizer reports.
+mkdir -p "$build_dir"
 cmake -S . -B "$build_dir" -DCMAKE_CXX_COMPILER="$cxx" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  -DMINEMAP_BUILD_FUZZ=ON -DMINEMAP_SANITIZE=address,undefined -DMINEMAP_BUILD_BENCH=OFF > "$build_dir.configure.log" 2>&1 ||
-  { cat "$build_dir.configure.log" >&2; exit 1; }
+  -DMINEMAP_BUILD_FUZZ=ON -DMINEMAP_SANITIZE=address,undefined -DMINEMAP_BUILD_BENCH=OFF > "$build_dir/configure.log" 2>&1 ||
+  { cat "$build_dir/configure.log" >&2; exit 1; }
 targets=()
 for name in "${names[@]}"; do targets+=(--target "fuzz_${name}"); done
 cmake --build "$build_dir" -j "$jobs" "${targets[@]}"

@@ -17,22 +17,28 @@ std::filesystem::path temp_path_for(const std::filesystem::path& path) {
   return path.string() + std::string(kTempSuffix) + std::to_string(::getpid());
 }
 
-void fsync_path(const std::filesystem::path& path) {
+/// Flushes a file (or folder) to disk; false when the flush failed (e.g. disk full on write-back).
+bool fsync_path(const std::filesystem::path& path) {
   const int fd = ::open(path.c_str(), O_RDONLY);
-  if (fd >= 0) {
-    ::fsync(fd);
-    ::close(fd);
-  }
+  if (fd < 0) return false;
+  const bool ok = ::fsync(fd) == 0;
+  ::close(fd);
+  return ok;
 }
 
 void commit(const std::filesystem::path& tmp, const std::filesystem::path& path) {
-  fsync_path(tmp);
   std::error_code ec;
+  if (!fsync_path(tmp)) {
+    std::filesystem::remove(tmp, ec);
+    throw OutputError("cannot write " + path.string() + ": flushing to disk failed");
+  }
   std::filesystem::rename(tmp, path, ec);
   if (ec) {
     std::filesystem::remove(tmp, ec);
     throw OutputError("cannot write " + path.string() + ": rename failed: " + ec.message());
   }
+  // The rename itself is durable only once the folder's entry is on disk.
+  fsync_path(path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path());
 }
 
 }  // namespace

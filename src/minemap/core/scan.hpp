@@ -2,6 +2,7 @@
 // The scan model: one 3D scan as the paper's tilting 2D scanner records it.
 #include <Eigen/Core>
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <string>
 #include <vector>

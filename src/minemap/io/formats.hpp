@@ -97,6 +97,20 @@ void write_kitti_poses(const fs::path& path, std::span<const Pose> poses_cm, Len
 /// gtsam_points-style graph: "vK x y z qx qy qz qw" per line (T_world_lidar). Returns by K.
 std::vector<Pose> read_graph_poses(const fs::path& path, LengthUnit unit = LengthUnit::kMetre);
 
+// Additions beyond the original contract (io owner):
+
+/// Writes a graph file in read_graph_poses' format, K = index in `poses_cm`.
+void write_graph_poses(const fs::path& path, std::span<const Pose> poses_cm, LengthUnit unit = LengthUnit::kMetre);
+
+/// Which trajectory format a file holds, told apart by its first data line ('#' comments and blank
+/// lines skipped): "vK ..." = graph, 8 values = TUM, 12 = KITTI, 4 or 16 = 4x4 matrices.
+enum class TrajectoryFormat { kMatrix4x4, kTum, kKitti, kGraph };
+TrajectoryFormat detect_trajectory_format(const fs::path& path);
+
+/// Reads any of the trajectory formats above (detect_trajectory_format), poses in file order
+/// (graph files: by K); TUM timestamps are dropped.
+std::vector<Pose> read_trajectory(const fs::path& path, LengthUnit unit = LengthUnit::kMetre);
+
 // ---- surveys: a folder of scans ----------------------------------------------------------------------
 
 struct SurveyReadSettings {

@@ -1,0 +1,84 @@
+// KITTI Velodyne .bin: raw little-endian float32 records, x y z intensity (4 floats, KITTI's own
+// files) or x y z (3 floats, e.g. gtsam_points' kitti_07_dump points.bin). No header, so the file size
+// alone says how many points there are; intensity is ignored.
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+
+#include "minemap/core/atomic_file.hpp"
+#include "minemap/io/binary_data.hpp"
+#include "minemap/io/formats.hpp"
+#include "minemap/io/scan_builder.hpp"
+#include "minemap/io/text_reader.hpp"
+
+namespace minemap::io {
+namespace {
+
+void require_supported_layout(int floats_per_point) {
+  if (floats_per_point != 3 && floats_per_point != 4) {
+    throw std::invalid_argument("KITTI .bin: floats_per_point must be 3 or 4, not " + std::to_string(floats_per_point));
+  }
+}
+
+}  // namespace
+
+Scan read_kitti_bin(const fs::path& path, const ReadSettings& settings, int floats_per_point) {
+  require_supported_layout(floats_per_point);
+  const std::string name = path.string();
+  const std::uint64_t record_bytes = 4 * static_cast<std::uint64_t>(floats_per_point);
+  // The size alone gives the point count: check it against max_points before reading the file.
+  std::error_code error;
+  const std::uintmax_t size_on_disk = fs::file_size(path, error);
+  if (!error && size_on_disk / record_bytes > settings.max_points) {
+    detail::fail_in_file(name, "holds " + std::to_string(size_on_disk / record_bytes) + " points, more than max_points = " +
+                                   std::to_string(settings.max_points));
+  }
+  const std::string bytes = detail::read_file_bytes(path);
+  if (bytes.empty()) detail::fail_at_byte(name, 0, "no points (empty file)");
+  const std::uint64_t whole_records = bytes.size() / record_bytes;
+  if (bytes.size() % record_bytes != 0) {
+    detail::fail_at_byte(name, whole_records * record_bytes,
+                         "file size " + std::to_string(bytes.size()) + " is not a multiple of " +
+                             std::to_string(record_bytes) + " bytes (" + std::to_string(floats_per_point) +
+                             " float32 per point): the last point is truncated");
+  }
+  if (whole_records > settings.max_points) {
+    detail::fail_in_file(name, "holds " + std::to_string(whole_records) + " points, more than max_points = " +
+                                   std::to_string(settings.max_points));
+  }
+  detail::ScanBuilder builder(path, settings, LengthUnit::kMetre);
+  builder.reserve(static_cast<std::size_t>(whole_records));
+  for (std::uint64_t i = 0; i < whole_records; ++i) {
+    const std::uint64_t offset = i * record_bytes;
+    const char* record = bytes.data() + offset;
+    const double x = detail::load_le<float>(record);
+    const double y = detail::load_le<float>(record + 4);
+    const double z = detail::load_le<float>(record + 8);
+    const double xyz[3] = {x, y, z};
+    for (int axis = 0; axis < 3; ++axis) {
+      if (!std::isfinite(xyz[axis])) {
+        detail::fail_at_byte(name, offset + 4 * static_cast<std::uint64_t>(axis),
+                             "point " + std::to_string(i) + ": " + static_cast<char>('x' + axis) + " is not finite");
+      }
+    }
+    const auto added = builder.add(x, y, z);
+    if (added != detail::ScanBuilder::AddResult::kOk) detail::fail_at_byte(name, offset, builder.describe(added));
+  }
+  return builder.finish(/*split_unmarked=*/false);
+}
+
+void write_kitti_bin(const fs::path& path, const Scan& scan, int floats_per_point, LengthUnit unit) {
+  require_supported_layout(floats_per_point);
+  const double divisor = centimetres_per(unit);
+  std::string out;
+  out.reserve(scan.size() * 4 * static_cast<std::size_t>(floats_per_point));
+  for (std::size_t i = 0; i < scan.size(); ++i) {
+    const Eigen::Vector3d p = scan.file_point(i) / divisor;
+    for (int axis = 0; axis < 3; ++axis) detail::append_le(out, static_cast<float>(p[axis]));
+    if (floats_per_point == 4) detail::append_le(out, 0.0f);  // minemap keeps no intensity
+  }
+  write_file_atomically(path, out);
+}
+
+}  // namespace minemap::io

@@ -1,0 +1,433 @@
+// PCL's PCD v0.7 (https://pointclouds.org/documentation/tutorials/pcd_file_format.html): a text header
+// (VERSION FIELDS SIZE TYPE COUNT WIDTH HEIGHT VIEWPOINT POINTS DATA), then ascii lines, binary
+// records (array of structures) or binary_compressed (uint32 compressed size, uint32 uncompressed
+// size, one LZF block that decompresses to a structure of arrays: each field's values for all points
+// in turn).
+//
+// Choices, documented here because PCL leaves them open:
+//  - x, y and z must be F4 or F8 with COUNT 1; every other field (any type, size, count) is skipped.
+//  - NaN points are dropped silently. PCL marks "no return" with NaN x/y/z in organized clouds
+//    (HEIGHT > 1), and a PCD file has no is_dense flag, so any PCD may hold them legitimately
+//    (pcl::removeNaNFromPointCloud drops a point when x, y or z is NaN; so do we). An infinite
+//    coordinate is never a PCL convention: it is an InputError at its line or byte.
+//  - VIEWPOINT (tx ty tz qw qx qy qz), PCL's sensor origin and orientation, becomes Scan::pose_cm
+//    (translation in cm): the initial guess T_world_file. Files written by PCL almost always carry
+//    the identity; the writer stores pose_cm there, so a round trip keeps the pose.
+//  - Bytes after the last point of binary data are ignored (as PCL does).
+#include <lzf.h>
+
+#include <array>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "minemap/core/atomic_file.hpp"
+#include "minemap/core/error.hpp"
+#include "minemap/io/binary_data.hpp"
+#include "minemap/io/formats.hpp"
+#include "minemap/io/pose_text.hpp"
+#include "minemap/io/scan_builder.hpp"
+#include "minemap/io/text_reader.hpp"
+#include "minemap/io/text_writer.hpp"
+
+namespace minemap::io {
+namespace {
+
+using detail::LineReader;
+
+/// The most bytes one point may occupy; real files have tens of bytes (FPFH: 132).
+constexpr std::uint64_t kMaxPointBytes = 1 << 20;
+/// One LZF back-reference expands 3 bytes into at most 264, so no block decompresses to more.
+constexpr std::uint64_t kLzfMaxExpansion = 88;
+
+struct PcdField {
+  std::string name;
+  std::uint64_t size = 0;  ///< bytes per value
+  char type = 0;           ///< 'I', 'U' or 'F'
+  std::uint64_t count = 1;
+  std::uint64_t byte_offset = 0;   ///< within a binary record (binary) or times POINTS (compressed)
+  std::uint64_t first_value = 0;   ///< index of its first value on an ascii line
+};
+
+struct PcdHeader {
+  std::vector<PcdField> fields;
+  std::uint64_t width = 0;
+  std::uint64_t height = 1;
+  std::uint64_t points = 0;
+  Pose viewpoint_cm = Pose::Identity();
+  PcdEncoding encoding = PcdEncoding::kAscii;
+  std::uint64_t point_bytes = 0;
+  std::uint64_t values_per_point = 0;
+  std::array<int, 3> xyz_fields{};  ///< indices into fields
+  std::size_t data_offset = 0;      ///< first byte after the DATA line
+};
+
+std::uint64_t parse_count(const LineReader& reader, std::string_view keyword, std::string_view token) {
+  std::uint64_t value = 0;
+  if (!detail::parse_uint64(token, value)) {
+    reader.fail(std::string(keyword) + " value " + detail::quoted(token) + " is not a non-negative integer");
+  }
+  return value;
+}
+
+/// Reads the header up to and including the DATA line and checks it, before any data is touched.
+PcdHeader read_header(LineReader& reader, const ReadSettings& settings, double scale_to_cm) {
+  PcdHeader header;
+  std::vector<std::string_view> names, sizes, types, counts;
+  bool have_width = false, have_points = false, have_data = false;
+  std::int64_t points_line = 0, width_line = 0;
+  std::vector<std::string> seen;
+  std::string_view line;
+  while (!have_data && reader.next(line)) {
+    const std::string_view content = detail::trim(line);
+    if (content.empty() || content.front() == '#') continue;
+    std::vector<std::string_view> tokens;
+    detail::split_all_tokens(content, tokens);
+    const std::string keyword(tokens.front());
+    tokens.erase(tokens.begin());
+    for (const auto& previous : seen) {
+      if (previous == keyword) reader.fail("header keyword " + keyword + " appears twice");
+    }
+    seen.push_back(keyword);
+    const auto require_values = [&](std::size_t expected) {
+      if (tokens.size() != expected) {
+        reader.fail(keyword + " expects " + std::to_string(expected) + " value(s), found " + std::to_string(tokens.size()));
+      }
+    };
+    if (keyword == "VERSION") {
+      // 0.7 in practice; earlier versions differ only in keywords we check anyway.
+    } else if (keyword == "FIELDS") {
+      if (tokens.empty()) reader.fail("FIELDS names no field");
+      names = tokens;
+    } else if (keyword == "SIZE") {
+      sizes = tokens;
+    } else if (keyword == "TYPE") {
+      types = tokens;
+    } else if (keyword == "COUNT") {
+      counts = tokens;
+    } else if (keyword == "WIDTH") {
+      require_values(1);
+      header.width = parse_count(reader, keyword, tokens[0]);
+      have_width = true;
+      width_line = reader.line_number();
+    } else if (keyword == "HEIGHT") {
+      require_values(1);
+      header.height = parse_count(reader, keyword, tokens[0]);
+    } else if (keyword == "VIEWPOINT") {
+      require_values(7);
+      std::array<double, 7> v{};
+      detail::parse_finite_values(reader, tokens, v, "VIEWPOINT");
+      const Eigen::Vector3d translation_cm = Eigen::Vector3d(v[0], v[1], v[2]) * scale_to_cm;
+      header.viewpoint_cm = detail::pose_from_quaternion(translation_cm, v[3], v[4], v[5], v[6], reader);
+      if (settings.right_handed_to_3dtk) header.viewpoint_cm = right_handed_pose_to_3dtk(header.viewpoint_cm, 1.0);
+    } else if (keyword == "POINTS") {
+      require_values(1);
+      header.points = parse_count(reader, keyword, tokens[0]);
+      have_points = true;
+      points_line = reader.line_number();
+    } else if (keyword == "DATA") {
+      require_values(1);
+      if (tokens[0] == "ascii") {
+        header.encoding = PcdEncoding::kAscii;
+      } else if (tokens[0] == "binary") {
+        header.encoding = PcdEncoding::kBinary;
+      } else if (tokens[0] == "binary_compressed") {
+        header.encoding = PcdEncoding::kBinaryCompressed;
+      } else {
+        reader.fail("unknown DATA type " + detail::quoted(tokens[0]) + " (expected ascii, binary or binary_compressed)");
+      }
+      have_data = true;
+    } else {
+      reader.fail("unknown header keyword " + detail::quoted(keyword));
+    }
+  }
+  if (!have_data) {
+    reader.fail(reader.line_number() == 0 ? "empty file, not a PCD" : "header has no DATA line (no point data)");
+  }
+  header.data_offset = reader.offset();
+
+  // Fields: from here on, messages point at the DATA line, where the header is complete.
+  if (names.empty()) reader.fail("header has no FIELDS line");
+  if (sizes.size() != names.size() || types.size() != names.size()) {
+    reader.fail("FIELDS names " + std::to_string(names.size()) + " fields but SIZE has " + std::to_string(sizes.size()) +
+                " and TYPE " + std::to_string(types.size()));
+  }
+  if (!counts.empty() && counts.size() != names.size()) {
+    reader.fail("FIELDS names " + std::to_string(names.size()) + " fields but COUNT has " + std::to_string(counts.size()));
+  }
+  header.xyz_fields = {-1, -1, -1};
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    PcdField field;
+    field.name = std::string(names[i]);
+    field.size = parse_count(reader, "SIZE", sizes[i]);
+    field.count = counts.empty() ? 1 : parse_count(reader, "COUNT", counts[i]);
+    if (types[i].size() != 1 || (types[i] != "I" && types[i] != "U" && types[i] != "F")) {
+      reader.fail("field " + field.name + ": TYPE " + detail::quoted(types[i]) + " is not I, U or F");
+    }
+    field.type = types[i][0];
+    const bool size_ok = field.type == 'F' ? (field.size == 4 || field.size == 8)
+                                           : (field.size == 1 || field.size == 2 || field.size == 4 || field.size == 8);
+    if (!size_ok) reader.fail("field " + field.name + ": SIZE " + std::to_string(field.size) + " is invalid for TYPE " + field.type);
+    if (field.count == 0 || field.count > kMaxPointBytes) {
+      reader.fail("field " + field.name + ": COUNT " + std::to_string(field.count) + " is out of range");
+    }
+    field.byte_offset = header.point_bytes;
+    field.first_value = header.values_per_point;
+    header.point_bytes += field.size * field.count;
+    header.values_per_point += field.count;
+    if (header.point_bytes > kMaxPointBytes) reader.fail("a point of more than 1 MiB: FIELDS/SIZE/COUNT are not plausible");
+    for (int axis = 0; axis < 3; ++axis) {
+      if (field.name == std::string(1, static_cast<char>('x' + axis)) && header.xyz_fields[axis] < 0) {
+        header.xyz_fields[axis] = static_cast<int>(i);
+        if (field.type != 'F' || field.count != 1) {
+          reader.fail("field " + field.name + " must be TYPE F (SIZE 4 or 8) with COUNT 1");
+        }
+      }
+    }
+    header.fields.push_back(std::move(field));
+  }
+  for (int axis = 0; axis < 3; ++axis) {
+    if (header.xyz_fields[axis] < 0) reader.fail(std::string("no field ") + static_cast<char>('x' + axis) + " in FIELDS");
+  }
+
+  // Counts: WIDTH * HEIGHT = POINTS, and never more than max_points (checked before any allocation).
+  if (!have_width) reader.fail("header has no WIDTH line");
+  if (header.height != 0 && header.width > std::numeric_limits<std::uint64_t>::max() / header.height) {
+    detail::fail_at_line(reader.path(), width_line, "WIDTH x HEIGHT overflows");
+  }
+  const std::uint64_t width_times_height = header.width * header.height;
+  if (!have_points) {
+    header.points = width_times_height;
+    points_line = width_line;
+  } else if (header.points != width_times_height) {
+    detail::fail_at_line(reader.path(), points_line,
+                         "POINTS " + std::to_string(header.points) + " differs from WIDTH x HEIGHT = " +
+                             std::to_string(header.width) + " x " + std::to_string(header.height));
+  }
+  if (header.points == 0) detail::fail_at_line(reader.path(), points_line, "no points (POINTS 0)");
+  if (header.points > settings.max_points) {
+    detail::fail_at_line(reader.path(), points_line,
+                         "claims " + std::to_string(header.points) + " points, more than max_points = " +
+                             std::to_string(settings.max_points));
+  }
+  return header;
+}
+
+/// Adds one point read from the data, or drops it when it is a NaN "no return" point.
+/// `where` is called to throw at the right line or byte.
+template <class Fail>
+void add_point(detail::ScanBuilder& builder, const std::array<double, 3>& xyz, Fail&& fail) {
+  if (std::isnan(xyz[0]) || std::isnan(xyz[1]) || std::isnan(xyz[2])) return;
+  for (int axis = 0; axis < 3; ++axis) {
+    if (!std::isfinite(xyz[static_cast<std::size_t>(axis)])) {
+      fail(axis, std::string(1, static_cast<char>('x' + axis)) + " is infinite");
+    }
+  }
+  const auto added = builder.add(xyz[0], xyz[1], xyz[2]);
+  if (added != detail::ScanBuilder::AddResult::kOk) fail(0, builder.describe(added));
+}
+
+void read_ascii_data(LineReader& reader, const PcdHeader& header, detail::ScanBuilder& builder, std::size_t file_size) {
+  // Each value takes at least one character and one separator: a cheap bound before reserving.
+  const std::uint64_t remaining = file_size - header.data_offset;
+  if (header.points > (remaining + 1) / (2 * header.values_per_point)) {
+    reader.fail("POINTS " + std::to_string(header.points) + " cannot fit in the " + std::to_string(remaining) +
+                " bytes after the header");
+  }
+  builder.reserve(static_cast<std::size_t>(header.points));
+  std::vector<std::string_view> tokens(header.values_per_point);
+  std::uint64_t lines_read = 0;
+  std::string_view line;
+  while (reader.next(line)) {
+    if (detail::is_blank(line)) continue;
+    if (lines_read == header.points) reader.fail("more data lines than POINTS " + std::to_string(header.points));
+    ++lines_read;
+    const std::size_t count = detail::split_tokens(line, tokens);
+    if (count != header.values_per_point) {
+      reader.fail("expected " + std::to_string(header.values_per_point) + " values per point (FIELDS/COUNT), found " +
+                  std::to_string(count));
+    }
+    std::array<double, 3> xyz{};
+    for (int axis = 0; axis < 3; ++axis) {
+      const std::string_view token = tokens[header.fields[static_cast<std::size_t>(header.xyz_fields[axis])].first_value];
+      if (detail::parse_double(token, xyz[static_cast<std::size_t>(axis)]) != detail::NumberStatus::kOk) {
+        reader.fail(std::string(1, static_cast<char>('x' + axis)) + " value " + detail::quoted(token) +
+                    " is not a number or out of range");
+      }
+    }
+    add_point(builder, xyz, [&](int, const std::string& message) { reader.fail(message); });
+  }
+  if (lines_read < header.points) {
+    reader.fail("only " + std::to_string(lines_read) + " of POINTS " + std::to_string(header.points) + " data lines");
+  }
+}
+
+/// Reads x, y, z of every point from decoded binary data. Field f of point i lies at
+/// field_base(f) + i * field_stride(f); for AoS records the stride is the record size, for the
+/// decompressed SoA blocks it is the field's own size. `byte_of` maps a data offset to the file
+/// offset to report (the compressed block's start for compressed data).
+template <class FieldBase, class FieldStride, class ByteOf>
+void read_binary_points(const char* data, const PcdHeader& header, detail::ScanBuilder& builder, const std::string& path,
+                        FieldBase&& field_base, FieldStride&& field_stride, ByteOf&& byte_of) {
+  builder.reserve(static_cast<std::size_t>(header.points));
+  std::array<std::uint64_t, 3> base{}, stride{};
+  std::array<bool, 3> is_double{};
+  for (std::size_t axis = 0; axis < 3; ++axis) {
+    const PcdField& field = header.fields[static_cast<std::size_t>(header.xyz_fields[axis])];
+    base[axis] = field_base(field);
+    stride[axis] = field_stride(field);
+    is_double[axis] = field.size == 8;
+  }
+  for (std::uint64_t i = 0; i < header.points; ++i) {
+    std::array<double, 3> xyz{};
+    for (std::size_t axis = 0; axis < 3; ++axis) {
+      const char* value = data + base[axis] + i * stride[axis];
+      xyz[axis] = is_double[axis] ? detail::load_le<double>(value) : detail::load_le<float>(value);
+    }
+    add_point(builder, xyz, [&](int axis, const std::string& message) {
+      const std::uint64_t offset = base[static_cast<std::size_t>(axis)] + i * stride[static_cast<std::size_t>(axis)];
+      detail::fail_at_byte(path, byte_of(offset), "point " + std::to_string(i) + ": " + message);
+    });
+  }
+}
+
+}  // namespace
+
+Scan read_pcd(const fs::path& path, const ReadSettings& settings) {
+  const std::string bytes = detail::read_file_bytes(path);
+  const std::string name = path.string();
+  LineReader reader(bytes, name);
+  detail::ScanBuilder builder(path, settings, LengthUnit::kMetre);
+  const PcdHeader header = read_header(reader, settings, centimetres_per(builder.unit()));
+
+  const std::uint64_t remaining = bytes.size() - header.data_offset;
+  const char* data = bytes.data() + header.data_offset;
+  if (header.points > std::numeric_limits<std::uint64_t>::max() / header.point_bytes) {
+    detail::fail_at_byte(name, header.data_offset, "POINTS x point size overflows");
+  }
+  const std::uint64_t data_bytes = header.points * header.point_bytes;
+  switch (header.encoding) {
+    case PcdEncoding::kAscii:
+      read_ascii_data(reader, header, builder, bytes.size());
+      break;
+    case PcdEncoding::kBinary: {
+      if (data_bytes > remaining) {
+        detail::fail_at_byte(name, header.data_offset + remaining,
+                             "binary data truncated: " + std::to_string(header.points) + " points of " +
+                                 std::to_string(header.point_bytes) + " bytes need " + std::to_string(data_bytes) +
+                                 " bytes, the file has " + std::to_string(remaining) + " after the header");
+      }
+      read_binary_points(
+          data, header, builder, name, [](const PcdField& f) { return f.byte_offset; },
+          [&](const PcdField&) { return header.point_bytes; },
+          [&](std::uint64_t offset) { return header.data_offset + offset; });
+      break;
+    }
+    case PcdEncoding::kBinaryCompressed: {
+      if (remaining < 8) {
+        detail::fail_at_byte(name, header.data_offset, "binary_compressed data truncated: no block sizes");
+      }
+      const std::uint64_t compressed_bytes = detail::load_le<std::uint32_t>(data);
+      const std::uint64_t uncompressed_bytes = detail::load_le<std::uint32_t>(data + 4);
+      if (compressed_bytes > remaining - 8) {
+        detail::fail_at_byte(name, header.data_offset,
+                             "compressed block of " + std::to_string(compressed_bytes) + " bytes is truncated (" +
+                                 std::to_string(remaining - 8) + " bytes left)");
+      }
+      if (uncompressed_bytes != data_bytes) {
+        detail::fail_at_byte(name, header.data_offset + 4,
+                             "uncompressed size " + std::to_string(uncompressed_bytes) + " differs from POINTS x point size = " +
+                                 std::to_string(data_bytes));
+      }
+      if (uncompressed_bytes > compressed_bytes * kLzfMaxExpansion) {
+        detail::fail_at_byte(name, header.data_offset,
+                             "uncompressed size " + std::to_string(uncompressed_bytes) + " cannot come from " +
+                                 std::to_string(compressed_bytes) + " LZF bytes");
+      }
+      std::string decompressed(static_cast<std::size_t>(uncompressed_bytes), '\0');
+      const unsigned int got = lzf_decompress(data + 8, static_cast<unsigned int>(compressed_bytes), decompressed.data(),
+                                              static_cast<unsigned int>(uncompressed_bytes));
+      if (got != uncompressed_bytes) {
+        detail::fail_at_byte(name, header.data_offset + 8,
+                             "LZF block is corrupt (decompressed to " + std::to_string(got) + " of " +
+                                 std::to_string(uncompressed_bytes) + " bytes)");
+      }
+      // Structure of arrays: field f's block starts at POINTS x (bytes of the fields before it).
+      read_binary_points(
+          decompressed.data(), header, builder, name,
+          [&](const PcdField& f) { return f.byte_offset * header.points; },
+          [](const PcdField& f) { return f.size * f.count; },
+          [&](std::uint64_t) { return header.data_offset + 8; });
+      break;
+    }
+  }
+  if (builder.size() == 0) {
+    detail::fail_at_byte(name, header.data_offset, "no points (all " + std::to_string(header.points) + " are NaN)");
+  }
+  Scan scan = builder.finish(/*split_unmarked=*/false);
+  scan.pose_cm = header.viewpoint_cm;
+  return scan;
+}
+
+void write_pcd(const fs::path& path, const Scan& scan, PcdEncoding encoding, LengthUnit unit) {
+  const double divisor = centimetres_per(unit);
+  const std::size_t n = scan.size();
+  const auto value = [&](std::size_t i, int axis) { return static_cast<float>(scan.file_point(i)[axis] / divisor); };
+
+  Eigen::Quaterniond q(Eigen::Matrix3d(scan.pose_cm.block<3, 3>(0, 0)));
+  q.normalize();
+  std::string out = "# .PCD v0.7 - Point Cloud Data file format (minemap)\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\n"
+                    "TYPE F F F\nCOUNT 1 1 1\nWIDTH " + std::to_string(n) + "\nHEIGHT 1\nVIEWPOINT";
+  for (const double v : {scan.pose_cm(0, 3) / divisor, scan.pose_cm(1, 3) / divisor, scan.pose_cm(2, 3) / divisor, q.w(),
+                         q.x(), q.y(), q.z()}) {
+    out += ' ';
+    detail::append_number(out, v);
+  }
+  out += "\nPOINTS " + std::to_string(n) + "\nDATA ";
+  switch (encoding) {
+    case PcdEncoding::kAscii:
+      out += "ascii\n";
+      for (std::size_t i = 0; i < n; ++i) {
+        for (int axis = 0; axis < 3; ++axis) {
+          if (axis > 0) out += ' ';
+          detail::append_number(out, value(i, axis));
+        }
+        out += '\n';
+      }
+      break;
+    case PcdEncoding::kBinary:
+      out += "binary\n";
+      out.reserve(out.size() + n * 12);
+      for (std::size_t i = 0; i < n; ++i) {
+        for (int axis = 0; axis < 3; ++axis) detail::append_le(out, value(i, axis));
+      }
+      break;
+    case PcdEncoding::kBinaryCompressed: {
+      out += "binary_compressed\n";
+      std::string soa;
+      soa.reserve(n * 12);
+      for (int axis = 0; axis < 3; ++axis) {
+        for (std::size_t i = 0; i < n; ++i) detail::append_le(soa, value(i, axis));
+      }
+      if (soa.size() > std::numeric_limits<std::uint32_t>::max() / 2) {
+        throw OutputError("cannot write " + path.string() + ": too many points for one LZF block");
+      }
+      // LZF expands incompressible data by at most 1 byte in 32.
+      std::string compressed(soa.size() + soa.size() / 16 + 64, '\0');
+      unsigned int compressed_bytes = 0;
+      if (!soa.empty()) {
+        compressed_bytes = lzf_compress(soa.data(), static_cast<unsigned int>(soa.size()), compressed.data(),
+                                        static_cast<unsigned int>(compressed.size()));
+        if (compressed_bytes == 0) throw OutputError("cannot write " + path.string() + ": LZF compression failed");
+      }
+      detail::append_le<std::uint32_t>(out, compressed_bytes);
+      detail::append_le<std::uint32_t>(out, static_cast<std::uint32_t>(soa.size()));
+      out.append(compressed.data(), compressed_bytes);
+      break;
+    }
+  }
+  write_file_atomically(path, out);
+}
+
+}  // namespace minemap::io

@@ -1,0 +1,429 @@
+// PLY (http://paulbourke.net/dataformats/ply/): a text header of elements and their properties, then
+// the elements' instances in header order, as ascii lines or binary little-endian records.
+//
+// Choices:
+//  - Only the "vertex" element is read; x, y and z may be any scalar type (float and double in
+//    practice, int in some exports), other vertex properties are skipped, lists included.
+//  - Elements declared before "vertex" (rare, e.g. faces first) are walked and skipped, lists
+//    properly; elements after it are not read at all.
+//  - ascii: one element instance per line (what every writer produces), so a wrong value count is
+//    reported at its line instead of shifting every later value.
+//  - binary_big_endian is refused with a clear message (no real survey data uses it).
+//  - NaN or infinite vertices are an InputError: PLY has no "no return" convention.
+#include <array>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "minemap/core/atomic_file.hpp"
+#include "minemap/io/binary_data.hpp"
+#include "minemap/io/formats.hpp"
+#include "minemap/io/scan_builder.hpp"
+#include "minemap/io/text_reader.hpp"
+#include "minemap/io/text_writer.hpp"
+
+namespace minemap::io {
+namespace {
+
+using detail::LineReader;
+
+enum class PlyScalar { kInt8, kUInt8, kInt16, kUInt16, kInt32, kUInt32, kFloat32, kFloat64 };
+
+struct PlyTypeName {
+  std::string_view name;
+  std::string_view alias;
+  PlyScalar type;
+};
+constexpr std::array<PlyTypeName, 8> kPlyTypes{{{"char", "int8", PlyScalar::kInt8},
+                                                {"uchar", "uint8", PlyScalar::kUInt8},
+                                                {"short", "int16", PlyScalar::kInt16},
+                                                {"ushort", "uint16", PlyScalar::kUInt16},
+                                                {"int", "int32", PlyScalar::kInt32},
+                                                {"uint", "uint32", PlyScalar::kUInt32},
+                                                {"float", "float32", PlyScalar::kFloat32},
+                                                {"double", "float64", PlyScalar::kFloat64}}};
+
+std::uint64_t size_of(PlyScalar type) {
+  switch (type) {
+    case PlyScalar::kInt8:
+    case PlyScalar::kUInt8:
+      return 1;
+    case PlyScalar::kInt16:
+    case PlyScalar::kUInt16:
+      return 2;
+    case PlyScalar::kInt32:
+    case PlyScalar::kUInt32:
+    case PlyScalar::kFloat32:
+      return 4;
+    case PlyScalar::kFloat64:
+      return 8;
+  }
+  return 0;
+}
+
+bool is_integer(PlyScalar type) { return type != PlyScalar::kFloat32 && type != PlyScalar::kFloat64; }
+
+double load_scalar(const char* bytes, PlyScalar type) {
+  switch (type) {
+    case PlyScalar::kInt8:
+      return detail::load_le<std::int8_t>(bytes);
+    case PlyScalar::kUInt8:
+      return detail::load_le<std::uint8_t>(bytes);
+    case PlyScalar::kInt16:
+      return detail::load_le<std::int16_t>(bytes);
+    case PlyScalar::kUInt16:
+      return detail::load_le<std::uint16_t>(bytes);
+    case PlyScalar::kInt32:
+      return detail::load_le<std::int32_t>(bytes);
+    case PlyScalar::kUInt32:
+      return detail::load_le<std::uint32_t>(bytes);
+    case PlyScalar::kFloat32:
+      return detail::load_le<float>(bytes);
+    case PlyScalar::kFloat64:
+      return detail::load_le<double>(bytes);
+  }
+  return 0.0;
+}
+
+PlyScalar parse_type(const LineReader& reader, std::string_view token) {
+  for (const auto& entry : kPlyTypes) {
+    if (token == entry.name || token == entry.alias) return entry.type;
+  }
+  reader.fail("unknown PLY property type " + detail::quoted(token));
+}
+
+struct PlyProperty {
+  std::string name;
+  PlyScalar type = PlyScalar::kFloat32;  ///< the value type (list items for lists)
+  bool is_list = false;
+  PlyScalar count_type = PlyScalar::kUInt8;  ///< lists only
+};
+
+struct PlyElement {
+  std::string name;
+  std::uint64_t count = 0;
+  std::int64_t line = 0;
+  std::vector<PlyProperty> properties;
+
+  bool has_lists() const {
+    for (const auto& p : properties) {
+      if (p.is_list) return true;
+    }
+    return false;
+  }
+  /// Bytes of one binary instance when every list is empty (the exact size without lists).
+  std::uint64_t min_binary_size() const {
+    std::uint64_t bytes = 0;
+    for (const auto& p : properties) bytes += p.is_list ? size_of(p.count_type) : size_of(p.type);
+    return bytes;
+  }
+};
+
+enum class PlyEncoding { kAscii, kBinaryLittleEndian };
+
+struct PlyHeader {
+  PlyEncoding encoding = PlyEncoding::kAscii;
+  std::vector<PlyElement> elements;
+  std::size_t vertex_element = 0;
+  std::array<std::size_t, 3> xyz_properties{};  ///< indices into the vertex element's properties
+  std::size_t data_offset = 0;
+};
+
+PlyHeader read_header(LineReader& reader, const ReadSettings& settings) {
+  PlyHeader header;
+  std::string_view line;
+  if (!reader.next(line) || detail::trim(line) != "ply") reader.fail("not a PLY file (the first line is not 'ply')");
+  bool have_format = false;
+  bool have_end = false;
+  std::vector<std::string_view> tokens;
+  while (!have_end && reader.next(line)) {
+    detail::split_all_tokens(line, tokens);
+    if (tokens.empty()) continue;
+    const std::string_view keyword = tokens[0];
+    if (keyword == "comment" || keyword == "obj_info") continue;
+    if (keyword == "end_header") {
+      have_end = true;
+    } else if (keyword == "format") {
+      if (have_format) reader.fail("second format line");
+      if (tokens.size() != 3) reader.fail("expected 'format <ascii|binary_little_endian> 1.0'");
+      if (tokens[1] == "ascii") {
+        header.encoding = PlyEncoding::kAscii;
+      } else if (tokens[1] == "binary_little_endian") {
+        header.encoding = PlyEncoding::kBinaryLittleEndian;
+      } else if (tokens[1] == "binary_big_endian") {
+        reader.fail("binary_big_endian PLY is not supported (convert it to binary_little_endian or ascii)");
+      } else {
+        reader.fail("unknown PLY format " + detail::quoted(tokens[1]));
+      }
+      have_format = true;
+    } else if (keyword == "element") {
+      if (tokens.size() != 3) reader.fail("expected 'element <name> <count>'");
+      PlyElement element;
+      element.name = std::string(tokens[1]);
+      element.line = reader.line_number();
+      if (!detail::parse_uint64(tokens[2], element.count)) {
+        reader.fail("element count " + detail::quoted(tokens[2]) + " is not a non-negative integer");
+      }
+      header.elements.push_back(std::move(element));
+    } else if (keyword == "property") {
+      if (header.elements.empty()) reader.fail("property before any element");
+      PlyProperty property;
+      if (tokens.size() == 5 && tokens[1] == "list") {
+        property.is_list = true;
+        property.count_type = parse_type(reader, tokens[2]);
+        if (!is_integer(property.count_type)) reader.fail("list count type must be an integer type");
+        property.type = parse_type(reader, tokens[3]);
+        property.name = std::string(tokens[4]);
+      } else if (tokens.size() == 3) {
+        property.type = parse_type(reader, tokens[1]);
+        property.name = std::string(tokens[2]);
+      } else {
+        reader.fail("expected 'property <type> <name>' or 'property list <count type> <type> <name>'");
+      }
+      header.elements.back().properties.push_back(std::move(property));
+    } else {
+      reader.fail("unknown PLY header keyword " + detail::quoted(keyword));
+    }
+  }
+  if (!have_end) reader.fail("header has no end_header line");
+  if (!have_format) reader.fail("header has no format line");
+  header.data_offset = reader.offset();
+
+  bool have_vertex = false;
+  for (std::size_t e = 0; e < header.elements.size() && !have_vertex; ++e) {
+    if (header.elements[e].name == "vertex") {
+      header.vertex_element = e;
+      have_vertex = true;
+    }
+  }
+  if (!have_vertex) reader.fail("no vertex element");
+  const PlyElement& vertex = header.elements[header.vertex_element];
+  for (std::size_t axis = 0; axis < 3; ++axis) {
+    const std::string axis_name(1, static_cast<char>('x' + axis));
+    bool found = false;
+    for (std::size_t p = 0; p < vertex.properties.size() && !found; ++p) {
+      if (vertex.properties[p].name != axis_name) continue;
+      if (vertex.properties[p].is_list) detail::fail_at_line(reader.path(), vertex.line, "vertex property " + axis_name + " is a list");
+      header.xyz_properties[axis] = p;
+      found = true;
+    }
+    if (!found) detail::fail_at_line(reader.path(), vertex.line, "vertex element has no property " + axis_name);
+  }
+  if (vertex.count == 0) detail::fail_at_line(reader.path(), vertex.line, "no points (element vertex 0)");
+  if (vertex.count > settings.max_points) {
+    detail::fail_at_line(reader.path(), vertex.line,
+                         "claims " + std::to_string(vertex.count) + " vertices, more than max_points = " +
+                             std::to_string(settings.max_points));
+  }
+  return header;
+}
+
+/// Binary data with bounds checks that report the file offset.
+class BinaryCursor {
+ public:
+  BinaryCursor(std::string_view bytes, std::size_t start, std::string path)
+      : bytes_(bytes), position_(start), path_(std::move(path)) {}
+
+  std::uint64_t position() const { return position_; }
+  std::uint64_t remaining() const { return bytes_.size() - position_; }
+  [[noreturn]] void fail(std::uint64_t offset, const std::string& message) const { detail::fail_at_byte(path_, offset, message); }
+
+  /// `count` bytes at the current position, then advances; fails when the file ends first.
+  const char* take(std::uint64_t count, std::string_view what) {
+    if (count > remaining()) {
+      fail(position_, "file ends inside " + std::string(what) + " (" + std::to_string(count) + " bytes needed, " +
+                          std::to_string(remaining()) + " left)");
+    }
+    const char* at = bytes_.data() + position_;
+    position_ += count;
+    return at;
+  }
+
+ private:
+  std::string_view bytes_;
+  std::uint64_t position_;
+  std::string path_;
+};
+
+/// Walks one binary instance of `element`; calls on_scalar(property index, bytes) for scalars.
+template <class OnScalar>
+void walk_binary_instance(BinaryCursor& cursor, const PlyElement& element, OnScalar&& on_scalar) {
+  for (std::size_t p = 0; p < element.properties.size(); ++p) {
+    const PlyProperty& property = element.properties[p];
+    if (!property.is_list) {
+      on_scalar(p, cursor.take(size_of(property.type), element.name + " property " + property.name));
+      continue;
+    }
+    const std::uint64_t at = cursor.position();
+    const double count = load_scalar(cursor.take(size_of(property.count_type), element.name + " list count"), property.count_type);
+    if (count < 0) cursor.fail(at, "negative list length in " + element.name + " property " + property.name);
+    cursor.take(static_cast<std::uint64_t>(count) * size_of(property.type), element.name + " list " + property.name);
+  }
+}
+
+void skip_binary_element(BinaryCursor& cursor, const PlyElement& element) {
+  if (element.properties.empty()) return;
+  if (!element.has_lists()) {
+    const std::uint64_t size = element.min_binary_size();
+    if (element.count > cursor.remaining() / size) {
+      cursor.fail(cursor.position(), "file ends inside element " + element.name + " (" + std::to_string(element.count) +
+                                         " instances of " + std::to_string(size) + " bytes declared)");
+    }
+    cursor.take(element.count * size, element.name);
+    return;
+  }
+  // Every instance takes at least one byte, so this loop ends with the file at the latest.
+  for (std::uint64_t i = 0; i < element.count; ++i) walk_binary_instance(cursor, element, [](std::size_t, const char*) {});
+}
+
+void read_binary_vertices(BinaryCursor& cursor, const PlyHeader& header, detail::ScanBuilder& builder) {
+  const PlyElement& vertex = header.elements[header.vertex_element];
+  // Checked before reserving: the declared count must fit in what is left of the file.
+  if (vertex.count > cursor.remaining() / vertex.min_binary_size()) {
+    cursor.fail(cursor.position(), "file ends inside the vertices: " + std::to_string(vertex.count) + " declared, " +
+                                       std::to_string(cursor.remaining()) + " bytes left");
+  }
+  builder.reserve(static_cast<std::size_t>(vertex.count));
+  for (std::uint64_t i = 0; i < vertex.count; ++i) {
+    std::array<double, 3> xyz{};
+    std::array<std::uint64_t, 3> offsets{};
+    walk_binary_instance(cursor, vertex, [&](std::size_t p, const char* bytes) {
+      for (std::size_t axis = 0; axis < 3; ++axis) {
+        if (header.xyz_properties[axis] == p) {
+          xyz[axis] = load_scalar(bytes, vertex.properties[p].type);
+          offsets[axis] = cursor.position() - size_of(vertex.properties[p].type);
+        }
+      }
+    });
+    for (std::size_t axis = 0; axis < 3; ++axis) {
+      if (!std::isfinite(xyz[axis])) {
+        cursor.fail(offsets[axis], "vertex " + std::to_string(i) + ": " + static_cast<char>('x' + axis) + " is not finite");
+      }
+    }
+    const auto added = builder.add(xyz[0], xyz[1], xyz[2]);
+    if (added != detail::ScanBuilder::AddResult::kOk) cursor.fail(offsets[0], builder.describe(added));
+  }
+}
+
+/// Checks one ascii instance line against `element`'s properties (lists: a count, then that many
+/// values) and returns the token index of each scalar property (unused for lists).
+void index_ascii_instance(const LineReader& reader, const PlyElement& element, std::span<const std::string_view> tokens,
+                          std::vector<std::size_t>& token_of_property) {
+  token_of_property.resize(element.properties.size());
+  std::size_t next = 0;
+  for (std::size_t p = 0; p < element.properties.size(); ++p) {
+    const PlyProperty& property = element.properties[p];
+    if (next >= tokens.size()) {
+      reader.fail(element.name + " line ends before property " + property.name + " (" + std::to_string(tokens.size()) +
+                  " values)");
+    }
+    token_of_property[p] = next;
+    if (!property.is_list) {
+      ++next;
+      continue;
+    }
+    std::uint64_t count = 0;
+    if (!detail::parse_uint64(tokens[next], count)) {
+      reader.fail("list length " + detail::quoted(tokens[next]) + " of " + property.name + " is not a non-negative integer");
+    }
+    if (count > tokens.size() - next - 1) reader.fail("list " + property.name + " is longer than its line");
+    next += 1 + count;
+  }
+  if (next != tokens.size()) {
+    reader.fail(element.name + " line has " + std::to_string(tokens.size()) + " values, the header declares " +
+                std::to_string(next));
+  }
+}
+
+/// The next non-blank line's tokens; fails when the file ends before `element`'s instances do.
+void next_ascii_instance(LineReader& reader, const PlyElement& element, std::uint64_t index,
+                         std::vector<std::string_view>& tokens) {
+  std::string_view line;
+  while (reader.next(line)) {
+    if (detail::is_blank(line)) continue;
+    detail::split_all_tokens(line, tokens);
+    return;
+  }
+  reader.fail("file ends after " + std::to_string(index) + " of " + std::to_string(element.count) + " " + element.name +
+              " lines");
+}
+
+void read_ascii_data(LineReader& reader, const PlyHeader& header, detail::ScanBuilder& builder, std::size_t file_size) {
+  std::vector<std::string_view> tokens;
+  std::vector<std::size_t> token_of_property;
+  for (std::size_t e = 0; e < header.vertex_element; ++e) {
+    const PlyElement& element = header.elements[e];
+    if (element.properties.empty()) continue;
+    for (std::uint64_t i = 0; i < element.count; ++i) {
+      next_ascii_instance(reader, element, i, tokens);
+      index_ascii_instance(reader, element, tokens, token_of_property);
+    }
+  }
+  const PlyElement& vertex = header.elements[header.vertex_element];
+  // Each value takes a character and a separator: a cheap bound before reserving.
+  const std::uint64_t remaining = file_size - reader.offset();
+  if (vertex.count > (remaining + 1) / (2 * vertex.properties.size())) {
+    detail::fail_at_line(reader.path(), vertex.line,
+                         std::to_string(vertex.count) + " vertices cannot fit in the " + std::to_string(remaining) +
+                             " bytes of data left");
+  }
+  builder.reserve(static_cast<std::size_t>(vertex.count));
+  for (std::uint64_t i = 0; i < vertex.count; ++i) {
+    next_ascii_instance(reader, vertex, i, tokens);
+    index_ascii_instance(reader, vertex, tokens, token_of_property);
+    std::array<double, 3> xyz{};
+    for (std::size_t axis = 0; axis < 3; ++axis) {
+      const std::string_view token = tokens[token_of_property[header.xyz_properties[axis]]];
+      if (detail::parse_double(token, xyz[axis]) != detail::NumberStatus::kOk || !std::isfinite(xyz[axis])) {
+        reader.fail(std::string(1, static_cast<char>('x' + axis)) + " value " + detail::quoted(token) +
+                    " is not a finite number");
+      }
+    }
+    const auto added = builder.add(xyz[0], xyz[1], xyz[2]);
+    if (added != detail::ScanBuilder::AddResult::kOk) reader.fail(builder.describe(added));
+  }
+}
+
+}  // namespace
+
+Scan read_ply(const fs::path& path, const ReadSettings& settings) {
+  const std::string bytes = detail::read_file_bytes(path);
+  LineReader reader(bytes, path.string());
+  detail::ScanBuilder builder(path, settings, LengthUnit::kMetre);
+  const PlyHeader header = read_header(reader, settings);
+  if (header.encoding == PlyEncoding::kAscii) {
+    read_ascii_data(reader, header, builder, bytes.size());
+  } else {
+    BinaryCursor cursor(bytes, header.data_offset, path.string());
+    for (std::size_t e = 0; e < header.vertex_element; ++e) skip_binary_element(cursor, header.elements[e]);
+    read_binary_vertices(cursor, header, builder);
+  }
+  return builder.finish(/*split_unmarked=*/false);
+}
+
+void write_ply(const fs::path& path, std::span<const Eigen::Vector3f> points_cm, bool binary, LengthUnit unit) {
+  const double divisor = centimetres_per(unit);
+  std::string out = "ply\nformat ";
+  out += binary ? "binary_little_endian" : "ascii";
+  out += " 1.0\ncomment minemap, unit ";
+  out += to_string(unit);
+  out += "\nelement vertex " + std::to_string(points_cm.size()) +
+         "\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+  out.reserve(out.size() + points_cm.size() * (binary ? 12 : 36));
+  for (const Eigen::Vector3f& p : points_cm) {
+    for (int axis = 0; axis < 3; ++axis) {
+      const auto value = static_cast<float>(p[axis] / divisor);
+      if (binary) {
+        detail::append_le(out, value);
+      } else {
+        if (axis > 0) out += ' ';
+        detail::append_number(out, value);
+      }
+    }
+    if (!binary) out += '\n';
+  }
+  write_file_atomically(path, out);
+}
+
+}  // namespace minemap::io

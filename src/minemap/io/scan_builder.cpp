@@ -1,0 +1,67 @@
+// Shared point intake of the readers: unit, frame, float range, slices, local origin (scan_builder.hpp).
+#include "minemap/io/scan_builder.hpp"
+
+#include <cmath>
+#include <limits>
+
+#include "minemap/io/text_reader.hpp"
+
+namespace minemap::io::detail {
+
+ScanBuilder::ScanBuilder(const std::filesystem::path& path, const ReadSettings& settings, LengthUnit default_unit)
+    : path_(path),
+      unit_(settings.unit.value_or(default_unit)),
+      scale_to_cm_(centimetres_per(unit_)),
+      right_handed_to_3dtk_(settings.right_handed_to_3dtk),
+      points_per_slice_(settings.points_per_slice),
+      max_points_(settings.max_points) {}
+
+ScanBuilder::AddResult ScanBuilder::add(double x, double y, double z) {
+  if (points_cm_.size() >= max_points_) return AddResult::kTooManyPoints;
+  const Eigen::Vector3d p_file(x, y, z);
+  const Eigen::Vector3d p_cm = right_handed_to_3dtk_ ? right_handed_to_3dtk(p_file, scale_to_cm_) : p_file * scale_to_cm_;
+  if (!p_cm.allFinite()) return AddResult::kOutOfFloatRange;  // finite metres near DBL_MAX overflow as cm
+  if (!origin_chosen_) {
+    origin_chosen_ = true;
+    if (p_cm.norm() > kAnchorDistance_cm) local_origin_cm_ = p_cm.array().round().matrix();
+  }
+  const Eigen::Vector3d local = p_cm - local_origin_cm_;
+  constexpr double kFloatMax = std::numeric_limits<float>::max();
+  if (!(local.cwiseAbs().maxCoeff() <= kFloatMax)) return AddResult::kOutOfFloatRange;
+  points_cm_.push_back(local.cast<float>());
+  return AddResult::kOk;
+}
+
+std::string ScanBuilder::describe(AddResult result) const {
+  if (result == AddResult::kTooManyPoints) {
+    return "more than " + std::to_string(max_points_) + " points (ReadSettings::max_points)";
+  }
+  return "coordinate out of range: the point does not fit a float in cm";
+}
+
+Scan ScanBuilder::finish(bool split_unmarked) {
+  Scan scan;
+  scan.name = path_.stem().string();
+  scan.source_path = path_.string();
+  const std::size_t count = points_cm_.size();
+  std::vector<std::size_t> starts = std::move(slice_starts_);
+  if (starts.empty() && split_unmarked && points_per_slice_ > 0) {
+    for (std::size_t start = 0; start < count; start += points_per_slice_) starts.push_back(start);
+  }
+  if (!starts.empty()) {
+    if (count > std::numeric_limits<std::uint32_t>::max()) {
+      fail_in_file(path_.string(), "too many points for slice offsets (more than 2^32)");
+    }
+    // Points before the first marker form a slice of their own.
+    if (starts.front() != 0) starts.insert(starts.begin(), 0);
+    scan.slice_offsets.reserve(starts.size() + 1);
+    for (const std::size_t start : starts) scan.slice_offsets.push_back(static_cast<std::uint32_t>(start));
+    scan.slice_offsets.push_back(static_cast<std::uint32_t>(count));
+  }
+  scan.points_cm = std::move(points_cm_);
+  scan.local_origin_cm = local_origin_cm_;
+  scan.recentre_if_far(kFarFromOrigin_cm);
+  return scan;
+}
+
+}  // namespace minemap::io::detail

@@ -1,0 +1,69 @@
+#pragma once
+// Internal to src/minemap/io: turns points as a file stores them (its unit, maybe a right-handed
+// frame) into a Scan (cm, 3DTK frame, float relative to a local origin). Every point reader feeds it,
+// so unit conversion, the change of frame and float-range checks exist once.
+//
+// Far clouds: when the first point lies more than kAnchorDistance_cm (1 km) from the file's origin,
+// where a float in cm has steps of 0.01 cm and more, points are stored relative to that point's
+// whole-cm position, so a cloud in UTM coordinates keeps float resolution (converting to float first
+// and recentring afterwards would already have lost it). finish() then calls Scan::recentre_if_far,
+// which moves the origin to the centroid when that lies more than 100 m away. A cloud around the
+// file's origin (within 1 km) keeps origin zero unless its centroid is more than 100 m out.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "minemap/core/scan.hpp"
+#include "minemap/io/formats.hpp"
+
+namespace minemap::io::detail {
+
+/// Scan::recentre_if_far's threshold: centroids farther out become the local origin.
+inline constexpr double kFarFromOrigin_cm = 10000.0;
+/// A first point farther out than this anchors the points before they are converted to float.
+inline constexpr double kAnchorDistance_cm = 100000.0;
+
+class ScanBuilder {
+ public:
+  enum class AddResult {
+    kOk,
+    kTooManyPoints,   ///< more than ReadSettings::max_points
+    kOutOfFloatRange  ///< the point, relative to the local origin, does not fit a float
+  };
+
+  ScanBuilder(const std::filesystem::path& path, const ReadSettings& settings, LengthUnit default_unit);
+
+  LengthUnit unit() const { return unit_; }
+  std::uint64_t max_points() const { return max_points_; }
+  std::size_t size() const { return points_cm_.size(); }
+  void reserve(std::size_t count) { points_cm_.reserve(count); }
+
+  /// Adds a point given in the file's unit and frame (finite values; callers check, as only they
+  /// know the line or byte to report).
+  [[nodiscard]] AddResult add(double x, double y, double z);
+
+  /// Marks the start of a slice at the current point (uos "# slice N" markers).
+  void begin_slice() { slice_starts_.push_back(points_cm_.size()); }
+
+  /// The scan, named after the file's stem. Slices come from begin_slice() markers, else from
+  /// ReadSettings::points_per_slice when `split_unmarked` is set, else there are none.
+  Scan finish(bool split_unmarked);
+
+  /// Message for a failed add(), for the caller to throw at its location.
+  std::string describe(AddResult result) const;
+
+ private:
+  std::filesystem::path path_;
+  LengthUnit unit_;
+  double scale_to_cm_;
+  bool right_handed_to_3dtk_;
+  std::uint32_t points_per_slice_;
+  std::uint64_t max_points_;
+  bool origin_chosen_ = false;
+  Eigen::Vector3d local_origin_cm_ = Eigen::Vector3d::Zero();
+  std::vector<Eigen::Vector3f> points_cm_;
+  std::vector<std::size_t> slice_starts_;
+};
+
+}  // namespace minemap::io::detail

@@ -1,0 +1,104 @@
+// Shared reading helpers of src/minemap/io: whole-file reads, error locations, locale-free numbers.
+#include "minemap/io/text_reader.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstring>
+
+namespace minemap::io::detail {
+
+std::string read_file_bytes(const std::filesystem::path& path) {
+  const std::string name = path.string();
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) fail_in_file(name, std::string("cannot open: ") + std::strerror(errno));
+  struct FdCloser {
+    int fd;
+    ~FdCloser() { ::close(fd); }
+  } closer{fd};
+  struct stat info {};
+  if (::fstat(fd, &info) != 0) fail_in_file(name, std::string("cannot read: ") + std::strerror(errno));
+  if (S_ISDIR(info.st_mode)) fail_in_file(name, "is a folder, not a file");
+  std::string bytes;
+  // Regular files: one allocation of the real size. Pipes and the like report 0 and grow as read.
+  if (S_ISREG(info.st_mode) && info.st_size > 0) bytes.reserve(static_cast<std::size_t>(info.st_size));
+  char buffer[1 << 16];
+  for (;;) {
+    const ssize_t got = ::read(fd, buffer, sizeof buffer);
+    if (got == 0) break;
+    if (got < 0) {
+      if (errno == EINTR) continue;
+      fail_in_file(name, std::string("cannot read: ") + std::strerror(errno));
+    }
+    bytes.append(buffer, static_cast<std::size_t>(got));
+  }
+  return bytes;
+}
+
+void fail_in_file(const std::string& path, const std::string& message) { throw InputError(FileLocation{path}, message); }
+
+void fail_at_line(const std::string& path, std::int64_t line, const std::string& message) {
+  throw InputError(FileLocation{path, line, -1}, message);
+}
+
+void fail_at_byte(const std::string& path, std::uint64_t byte_offset, const std::string& message) {
+  throw InputError(FileLocation{path, 0, static_cast<std::int64_t>(byte_offset)}, message);
+}
+
+NumberStatus parse_double(std::string_view token, double& value) {
+  if (token.empty()) return NumberStatus::kNotANumber;
+  // from_chars refuses a leading '+', strtod (3DTK, PCL) accepts it; "+-1" stays refused.
+  if (token.front() == '+') {
+    token.remove_prefix(1);
+    if (token.empty() || token.front() == '-' || token.front() == '+') return NumberStatus::kNotANumber;
+  }
+  const char* first = token.data();
+  const char* last = token.data() + token.size();
+  const auto [end, error] = std::from_chars(first, last, value, std::chars_format::general);
+  if (end != last) return NumberStatus::kNotANumber;
+  if (error == std::errc::result_out_of_range) return NumberStatus::kOutOfRange;
+  if (error != std::errc()) return NumberStatus::kNotANumber;
+  return NumberStatus::kOk;
+}
+
+bool parse_uint64(std::string_view token, std::uint64_t& value) {
+  if (!token.empty() && token.front() == '+') token.remove_prefix(1);
+  if (token.empty() || token.front() == '-' || token.front() == '+') return false;
+  const auto [end, error] = std::from_chars(token.data(), token.data() + token.size(), value);
+  return error == std::errc() && end == token.data() + token.size();
+}
+
+bool parse_int64(std::string_view token, std::int64_t& value) {
+  if (!token.empty() && token.front() == '+') token.remove_prefix(1);
+  if (token.empty() || token.front() == '+') return false;
+  const auto [end, error] = std::from_chars(token.data(), token.data() + token.size(), value);
+  return error == std::errc() && end == token.data() + token.size();
+}
+
+std::string quoted(std::string_view token) {
+  constexpr std::size_t kMaxShown = 40;
+  std::string shown;
+  for (const char c : token.substr(0, kMaxShown)) {
+    const auto byte = static_cast<unsigned char>(c);
+    shown += (byte >= 0x20 && byte < 0x7f) ? c : '?';
+  }
+  if (token.size() > kMaxShown) shown += "...";
+  return "'" + shown + "'";
+}
+
+void parse_finite_values(const LineReader& reader, std::span<const std::string_view> tokens, std::span<double> values,
+                         std::string_view what) {
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const NumberStatus status = parse_double(tokens[i], values[i]);
+    const std::string which = std::string(what) + " value " + std::to_string(i + 1);
+    if (status == NumberStatus::kNotANumber) reader.fail(which + " " + quoted(tokens[i]) + " is not a number");
+    if (status == NumberStatus::kOutOfRange) reader.fail(which + " " + quoted(tokens[i]) + " is out of range");
+    if (!std::isfinite(values[i])) reader.fail(which + " " + quoted(tokens[i]) + " is not finite");
+  }
+}
+
+}  // namespace minemap::io::detail

@@ -1,0 +1,117 @@
+#pragma once
+// Internal to src/minemap/io: the pieces every reader shares, so that line numbers, byte offsets and
+// number parsing are written once.
+//  - read_file_bytes: the whole file in memory in one read (fast, and binary formats can check the
+//    sizes a header claims against the real file size before allocating anything).
+//  - LineReader: splits text into lines with 1-based numbers ('\n' or "\r\n"), for error messages.
+//  - split_tokens / parse_double / parse_uint64: whitespace tokens and std::from_chars numbers, which
+//    are locale-independent (strtod would read "1,5" in a German locale and "1.5" not at all).
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "minemap/core/error.hpp"
+
+namespace minemap::io::detail {
+
+/// The file's bytes. InputError naming the file when it is missing, a folder or unreadable.
+std::string read_file_bytes(const std::filesystem::path& path);
+
+[[noreturn]] void fail_in_file(const std::string& path, const std::string& message);
+[[noreturn]] void fail_at_line(const std::string& path, std::int64_t line, const std::string& message);
+[[noreturn]] void fail_at_byte(const std::string& path, std::uint64_t byte_offset, const std::string& message);
+
+/// Walks `text` line by line. Lines are returned without their terminator ('\n', "\r\n").
+class LineReader {
+ public:
+  LineReader(std::string_view text, std::string path) : text_(text), path_(std::move(path)) {}
+
+  /// The next line, or false at the end of the text.
+  bool next(std::string_view& line) {
+    if (offset_ >= text_.size()) return false;
+    const std::size_t end = text_.find('\n', offset_);
+    const std::size_t line_end = end == std::string_view::npos ? text_.size() : end;
+    line = text_.substr(offset_, line_end - offset_);
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    offset_ = end == std::string_view::npos ? text_.size() : end + 1;
+    ++line_number_;
+    return true;
+  }
+
+  /// 1-based number of the line last returned by next() (0 before the first).
+  std::int64_t line_number() const { return line_number_; }
+  /// Byte offset just past the last returned line: where binary data after a text header starts.
+  std::size_t offset() const { return offset_; }
+  const std::string& path() const { return path_; }
+
+  /// InputError at the line last returned.
+  [[noreturn]] void fail(const std::string& message) const { fail_at_line(path_, line_number_, message); }
+
+ private:
+  std::string_view text_;
+  std::string path_;
+  std::size_t offset_ = 0;
+  std::int64_t line_number_ = 0;
+};
+
+inline bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
+
+inline std::string_view trim(std::string_view text) {
+  while (!text.empty() && is_space(text.front())) text.remove_prefix(1);
+  while (!text.empty() && is_space(text.back())) text.remove_suffix(1);
+  return text;
+}
+
+/// The line up to a '#' (a comment runs to the end of the line, as in 3DTK and TUM files).
+inline std::string_view strip_comment(std::string_view line) {
+  const std::size_t hash = line.find('#');
+  return hash == std::string_view::npos ? line : line.substr(0, hash);
+}
+
+inline bool is_blank(std::string_view line) { return trim(line).empty(); }
+
+/// Splits `line` at whitespace into `out`. Returns the number of tokens on the line, which may be more
+/// than out.size() (the extra tokens are counted but not stored), so callers can report "found N".
+inline std::size_t split_tokens(std::string_view line, std::span<std::string_view> out) {
+  std::size_t count = 0;
+  std::size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() && is_space(line[i])) ++i;
+    if (i >= line.size()) break;
+    const std::size_t start = i;
+    while (i < line.size() && !is_space(line[i])) ++i;
+    if (count < out.size()) out[count] = line.substr(start, i - start);
+    ++count;
+  }
+  return count;
+}
+
+/// All whitespace tokens of `line` into `out` (resized); for lines whose length is not known ahead.
+inline void split_all_tokens(std::string_view line, std::vector<std::string_view>& out) {
+  out.resize(split_tokens(line, {}));
+  split_tokens(line, out);
+}
+
+enum class NumberStatus { kOk, kNotANumber, kOutOfRange };
+
+/// A whole token as a double, C locale: decimal or exponent form, an optional leading '+' (strtod
+/// accepts it), "nan" and "inf" (callers decide whether those are allowed). Hex floats are refused.
+NumberStatus parse_double(std::string_view token, double& value);
+
+/// A whole token as a non-negative decimal integer (an optional leading '+'; no sign '-', no spaces).
+bool parse_uint64(std::string_view token, std::uint64_t& value);
+bool parse_int64(std::string_view token, std::int64_t& value);
+
+/// Quotes a token for an error message, shortened so a binary blob does not flood the terminal.
+std::string quoted(std::string_view token);
+
+/// Parses tokens[i] into values[i] as finite doubles; fails at the reader's line otherwise.
+/// `what` names the values for the message ("pose", "point").
+void parse_finite_values(const LineReader& reader, std::span<const std::string_view> tokens, std::span<double> values,
+                         std::string_view what);
+
+}  // namespace minemap::io::detail

@@ -1,0 +1,192 @@
+// Survey folders: the uos round trip (points, slices, poses, truth), layout detection, initial pose
+// files, and the errors for missing poses, empty or mixed folders and pose-count mismatches.
+#include <gtest/gtest.h>
+
+#include "io_test_helpers.hpp"
+#include "minemap/io/formats.hpp"
+
+namespace minemap {
+namespace {
+
+using test::expect_input_error;
+using test::TempDir;
+using test::write_text;
+
+std::vector<Scan> sample_scans(std::size_t count) {
+  std::vector<Scan> scans;
+  for (std::size_t k = 0; k < count; ++k) {
+    Scan scan = test::random_scan(300 + 50 * k, -2000.0f, 2000.0f, static_cast<std::uint32_t>(100 + k));
+    scan.slice_offsets = {0, 100, 200, static_cast<std::uint32_t>(scan.size())};
+    EulerPose euler;
+    euler.position_cm = Eigen::Vector3d(500.0 * static_cast<double>(k), 10.0, -3.25);
+    euler.angles_deg = Eigen::Vector3d(1.0, 15.0 * static_cast<double>(k), -2.0);
+    scan.pose_cm = euler_to_pose(euler);
+    scans.push_back(std::move(scan));
+  }
+  return scans;
+}
+
+TEST(Survey, UosRoundTripKeepsPointsSlicesPosesAndTruth) {
+  TempDir dir;
+  const auto scans = sample_scans(3);
+  std::vector<Pose> truth;
+  for (const Scan& scan : scans) truth.push_back(scan.pose_cm * euler_to_pose({Eigen::Vector3d(1, 2, 3), Eigen::Vector3d(0, 0, 1)}));
+  io::write_uos_survey(dir.path(), scans, truth);
+  EXPECT_TRUE(std::filesystem::exists(dir / "scan002.3d"));
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / "truth" / "scan002.pose"));
+
+  const io::Survey survey = io::read_survey(dir.path());
+  EXPECT_EQ(survey.format, "uos");
+  EXPECT_EQ(survey.unit, LengthUnit::kCentimetre);
+  ASSERT_EQ(survey.scans.size(), scans.size());
+  ASSERT_TRUE(survey.truth_cm.has_value());
+  for (std::size_t k = 0; k < scans.size(); ++k) {
+    const Scan& back = survey.scans[k];
+    EXPECT_EQ(back.name, "scan00" + std::to_string(k));
+    EXPECT_EQ(back.points_cm, scans[k].points_cm);
+    EXPECT_EQ(back.slice_offsets, scans[k].slice_offsets);
+    EXPECT_LT((back.pose_cm - scans[k].pose_cm).cwiseAbs().maxCoeff(), 1e-9);
+    EXPECT_LT(((*survey.truth_cm)[k] - truth[k]).cwiseAbs().maxCoeff(), 1e-9);
+  }
+  // Without truth/ there is no truth.
+  std::filesystem::remove_all(dir.path() / "truth");
+  EXPECT_FALSE(io::read_survey(dir.path()).truth_cm.has_value());
+}
+
+TEST(Survey, UosNumberingGapsKeepNumberOrder) {
+  TempDir dir;
+  const auto scans = sample_scans(3);
+  const char* stems[] = {"scan010", "scan002", "scan1000"};  // 1000 sorts before 002 as text
+  for (std::size_t k = 0; k < 3; ++k) {
+    io::write_uos_points(dir / (std::string(stems[k]) + ".3d"), scans[k]);
+    io::write_uos_pose(dir / (std::string(stems[k]) + ".pose"), scans[k].pose_cm);
+  }
+  const io::Survey survey = io::read_survey(dir.path());
+  ASSERT_EQ(survey.scans.size(), 3u);
+  EXPECT_EQ(survey.scans[0].name, "scan002");
+  EXPECT_EQ(survey.scans[1].name, "scan010");
+  EXPECT_EQ(survey.scans[2].name, "scan1000");
+  EXPECT_EQ(survey.scans[0].size(), scans[1].size());
+}
+
+TEST(Survey, UosErrorsNameTheFile) {
+  TempDir dir;
+  const auto scans = sample_scans(3);
+  io::write_uos_survey(dir.path(), scans, std::vector<Pose>(3, Pose::Identity()));
+  // A partial truth/ folder is a mistake, not "no truth".
+  std::filesystem::remove(dir.path() / "truth" / "scan001.pose");
+  expect_input_error([&] { io::read_survey(dir.path()); }, {"truth/scan001.pose", "missing"});
+  std::filesystem::remove_all(dir.path() / "truth");
+  // A missing pose file names the pose file.
+  std::filesystem::remove(dir / "scan001.pose");
+  expect_input_error([&] { io::read_survey(dir.path()); }, {(dir / "scan001.pose").string(), "missing"});
+  // ... unless initial poses are given, in any trajectory format.
+  io::write_tum(dir / "initial.tum", std::vector<io::TimedPose>(3), LengthUnit::kCentimetre);
+  io::SurveyReadSettings settings;
+  settings.initial_poses = dir / "initial.tum";
+  settings.read.unit = LengthUnit::kCentimetre;
+  const io::Survey survey = io::read_survey(dir.path(), settings);
+  for (const Scan& scan : survey.scans) EXPECT_TRUE(scan.pose_cm.isIdentity());
+  // A broken point file is reported with its own name and line.
+  write_text(dir / "scan002.3d", "1 2 3\nbroken line\n");
+  expect_input_error([&] { io::read_survey(dir.path(), settings); }, {(dir / "scan002.3d").string() + ":2:"});
+  // Two files with one number.
+  io::write_uos_points(dir / "scan0001.3d", scans[1]);
+  expect_input_error([&] { io::read_survey(dir.path(), settings); }, {"same scan number"});
+}
+
+TEST(Survey, EmptyMixedAndMissingFoldersAreRefused) {
+  TempDir dir;
+  expect_input_error([&] { io::read_survey(dir.path()); }, {dir.path().string(), "no scans found"});
+  write_text(dir / "notes.txt", "not a scan");
+  expect_input_error([&] { io::read_survey(dir.path()); }, {"no scans found"});
+  expect_input_error([&] { io::read_survey(dir / "absent"); }, {"absent", "not a folder"});
+  const Scan scan = test::random_scan(10, -1.0f, 1.0f, 1);
+  io::write_pcd(dir / "a.pcd", scan, io::PcdEncoding::kBinary);
+  io::write_uos_points(dir / "scan000.3d", scan);
+  expect_input_error([&] { io::read_survey(dir.path()); }, {dir.path().string(), "several layouts"});
+}
+
+TEST(Survey, PcdAndPlyFoldersWithInitialPoses) {
+  TempDir dir;
+  const auto scans = sample_scans(3);
+  const char* names[] = {"b_second", "a_first", "c_third"};
+  for (std::size_t k = 0; k < 3; ++k) {
+    Scan scan = scans[k];
+    scan.pose_cm = Pose::Identity();
+    io::write_pcd(dir / (std::string(names[k]) + ".pcd"), scan, io::PcdEncoding::kBinaryCompressed);
+  }
+  io::Survey survey = io::read_survey(dir.path());
+  EXPECT_EQ(survey.format, "pcd");
+  EXPECT_EQ(survey.unit, LengthUnit::kMetre);
+  ASSERT_EQ(survey.scans.size(), 3u);
+  EXPECT_EQ(survey.scans[0].name, "a_first");  // sorted by name
+  EXPECT_EQ(survey.scans[0].size(), scans[1].size());
+  EXPECT_TRUE(survey.scans[0].pose_cm.isIdentity());
+  EXPECT_FALSE(survey.truth_cm.has_value());
+
+  TempDir poses_dir;
+  std::vector<Pose> initial;
+  for (const Scan& scan : scans) initial.push_back(scan.pose_cm);
+  io::write_kitti_poses(poses_dir / "initial_kitti.txt", initial);
+  io::SurveyReadSettings settings;
+  settings.initial_poses = poses_dir / "initial_kitti.txt";
+  survey = io::read_survey(dir.path(), settings);
+  for (std::size_t k = 0; k < 3; ++k) EXPECT_LT((survey.scans[k].pose_cm - initial[k]).cwiseAbs().maxCoeff(), 1e-9);
+
+  initial.pop_back();
+  io::write_matrix_poses(poses_dir / "two.txt", initial);
+  settings.initial_poses = poses_dir / "two.txt";
+  expect_input_error([&] { io::read_survey(dir.path(), settings); }, {"two.txt", "has 2 poses, the survey has 3 scans"});
+
+  TempDir ply_dir;
+  io::write_ply(ply_dir / "map.ply", scans[0].points_cm, true, LengthUnit::kMetre);
+  survey = io::read_survey(ply_dir.path());
+  EXPECT_EQ(survey.format, "ply");
+  ASSERT_EQ(survey.scans.size(), 1u);
+  EXPECT_EQ(survey.scans[0].name, "map");
+}
+
+TEST(Survey, KittiFolderLayouts) {
+  TempDir flat;
+  const auto scans = sample_scans(2);
+  io::write_kitti_bin(flat / "000000.bin", scans[0]);
+  io::write_kitti_bin(flat / "000001.bin", scans[1]);
+  io::Survey survey = io::read_survey(flat.path());
+  EXPECT_EQ(survey.format, "kitti");
+  ASSERT_EQ(survey.scans.size(), 2u);
+  EXPECT_EQ(survey.scans[1].name, "000001");
+  EXPECT_EQ(survey.scans[1].size(), scans[1].size());
+
+  TempDir nested;
+  std::vector<Pose> graph;
+  for (std::size_t k = 0; k < 2; ++k) {
+    const auto folder = nested.path() / ("00000" + std::to_string(k));
+    std::filesystem::create_directories(folder);
+    io::write_kitti_bin(folder / "points.bin", scans[k], 3);
+    graph.push_back(scans[k].pose_cm);
+  }
+  io::write_graph_poses(nested / "graph.txt", graph);
+  survey = io::read_survey(nested.path());
+  ASSERT_EQ(survey.scans.size(), 2u);
+  EXPECT_EQ(survey.scans[0].name, "000000");
+  EXPECT_TRUE(survey.scans[0].pose_cm.isIdentity());  // initial guess: identity
+  ASSERT_TRUE(survey.truth_cm.has_value());
+  for (std::size_t k = 0; k < 2; ++k) EXPECT_LT(((*survey.truth_cm)[k] - graph[k]).cwiseAbs().maxCoeff(), 1e-9);
+  write_text(nested / "graph.txt", "v0 0 0 0 0 0 0 1\n");
+  expect_input_error([&] { io::read_survey(nested.path()); }, {"graph.txt", "has 1 poses"});
+}
+
+TEST(Survey, WriterRefusesFoldersWithLeftoverScans) {
+  TempDir dir;
+  io::write_uos_survey(dir.path(), sample_scans(3));
+  EXPECT_THROW(io::write_uos_survey(dir.path(), sample_scans(2)), OutputError);
+  EXPECT_NO_THROW(io::write_uos_survey(dir.path(), sample_scans(3)));  // overwriting the same scans is fine
+  EXPECT_THROW(io::write_uos_survey(dir.path(), sample_scans(3), std::vector<Pose>(2)), std::invalid_argument);
+  // A stale truth/ would be read back as the new survey's truth.
+  EXPECT_NO_THROW(io::write_uos_survey(dir.path(), sample_scans(3), std::vector<Pose>(3, Pose::Identity())));
+  EXPECT_THROW(io::write_uos_survey(dir.path(), sample_scans(3)), OutputError);
+}
+
+}  // namespace
+}  // namespace minemap

@@ -1,0 +1,371 @@
+// 3DTK uos files: .3d points (3DTK's parsing rules, slice markers, exact round trips), .pose
+// (Euler conventions checked against an independent Rx*Ry*Rz) and .frames (column-major layout).
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <clocale>
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+#include <sstream>
+
+#include "io_test_helpers.hpp"
+#include "minemap/io/formats.hpp"
+
+namespace minemap {
+namespace {
+
+using test::at_line;
+using test::expect_input_error;
+using test::TempDir;
+using test::write_text;
+
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+/// R = Rx(a) * Ry(b) * Rz(c) built from Eigen's axis rotations, independent of minemap's formulas.
+Eigen::Matrix3d rx_ry_rz(const Eigen::Vector3d& angles_deg) {
+  return (Eigen::AngleAxisd(angles_deg.x() * kDegToRad, Eigen::Vector3d::UnitX()) *
+          Eigen::AngleAxisd(angles_deg.y() * kDegToRad, Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(angles_deg.z() * kDegToRad, Eigen::Vector3d::UnitZ()))
+      .toRotationMatrix();
+}
+
+std::vector<std::string> tokens_of(const std::string& text) {
+  std::istringstream in(text);
+  std::vector<std::string> tokens;
+  for (std::string token; in >> token;) tokens.push_back(token);
+  return tokens;
+}
+
+// ---- .3d points ---------------------------------------------------------------------------------
+
+TEST(UosPoints, RoundTripIsBitExactAndKeepsSlices) {
+  TempDir dir;
+  Scan scan = test::random_scan(1000, -5000.0f, 5000.0f, 7);
+  scan.slice_offsets = {0, 100, 100, 350, 999, 1000};  // includes an empty slice and a 1-point slice
+  const auto path = dir / "scan007.3d";
+  io::write_uos_points(path, scan);
+  const Scan back = io::read_uos_points(path);
+  EXPECT_EQ(back.name, "scan007");
+  ASSERT_EQ(back.size(), scan.size());
+  for (std::size_t i = 0; i < scan.size(); ++i) ASSERT_EQ(back.points_cm[i], scan.points_cm[i]) << "point " << i;
+  EXPECT_EQ(back.slice_offsets, scan.slice_offsets);
+  EXPECT_TRUE(back.local_origin_cm.isZero());
+}
+
+TEST(UosPoints, RoundTripInMetresIsExact) {
+  TempDir dir;
+  const Scan scan = test::random_scan(2000, -8000.0f, 8000.0f, 11);
+  const auto path = dir / "scan000.3d";
+  io::write_uos_points(path, scan, LengthUnit::kMetre);
+  io::ReadSettings settings;
+  settings.unit = LengthUnit::kMetre;
+  const Scan back = io::read_uos_points(path, settings);
+  ASSERT_EQ(back.size(), scan.size());
+  for (std::size_t i = 0; i < scan.size(); ++i) ASSERT_EQ(back.points_cm[i], scan.points_cm[i]) << "point " << i;
+  EXPECT_FALSE(back.has_slices());
+}
+
+TEST(UosPoints, FarCloudKeepsCentimetreResolution) {
+  TempDir dir;
+  Scan scan = test::random_scan(500, -300.0f, 300.0f, 3);
+  scan.local_origin_cm = Eigen::Vector3d(1.0e7, -2.0e7, 3.0e6);  // 100 km out: float alone has 1-2 m steps
+  const auto path = dir / "scan001.3d";
+  io::write_uos_points(path, scan);
+  const Scan back = io::read_uos_points(path);
+  ASSERT_EQ(back.size(), scan.size());
+  EXPECT_GT(back.local_origin_cm.norm(), 1.0e6);
+  for (std::size_t i = 0; i < scan.size(); ++i) {
+    ASSERT_LT((back.file_point(i) - scan.file_point(i)).norm(), 1e-3) << "point " << i;
+  }
+}
+
+TEST(UosPoints, Reads3dtkStyleInputWithHeaderCommentsAndReflectance) {
+  TempDir dir;
+  const auto path = dir / "scan000.3d";
+  write_text(path,
+             "81360 points\r\n"          // header: 2 tokens, tolerated
+             "w x b\r\n"                  // header: not numbers, tolerated
+             "# a comment\r\n"
+             "\r\n"
+             "1.5\t-2 3e2 17\r\n"         // tabs, exponent, reflectance column
+             "  +4 5 6 0.5 # trailing comment\r\n"
+             "\n"
+             "-7.25 8 9 1");             // no final newline
+  const Scan scan = io::read_uos_points(path);
+  ASSERT_EQ(scan.size(), 3u);
+  EXPECT_EQ(scan.points_cm[0], Eigen::Vector3f(1.5f, -2.0f, 300.0f));
+  EXPECT_EQ(scan.points_cm[1], Eigen::Vector3f(4.0f, 5.0f, 6.0f));
+  EXPECT_EQ(scan.points_cm[2], Eigen::Vector3f(-7.25f, 8.0f, 9.0f));
+  EXPECT_FALSE(scan.has_slices());
+}
+
+TEST(UosPoints, TenHeaderLinesAreToleratedButNotEleven) {
+  TempDir dir;
+  std::string ten_bad;
+  for (int i = 0; i < 10; ++i) ten_bad += "header line " + std::to_string(i) + "\n";
+  const auto ok_path = dir / "ok.3d";
+  write_text(ok_path, ten_bad + "1 2 3\n");
+  EXPECT_EQ(io::read_uos_points(ok_path).size(), 1u);
+
+  const auto bad_path = dir / "bad.3d";
+  write_text(bad_path, ten_bad + "# comments do not count\none too many\n1 2 3\n");
+  expect_input_error([&] { io::read_uos_points(bad_path); }, {at_line(bad_path, 12), "more than 10"});
+}
+
+TEST(UosPoints, BadLineAfterTheFirstPointNamesItsLine) {
+  TempDir dir;
+  const auto path = dir / "scan000.3d";
+  write_text(path, "# x y z\n1 2 3\n4 5 6\n7 8 x9\n");
+  expect_input_error([&] { io::read_uos_points(path); }, {at_line(path, 4), "'x9' is not a number"});
+  write_text(path, "1 2 3\n4 5\n");
+  expect_input_error([&] { io::read_uos_points(path); }, {at_line(path, 2), "found 2"});
+  write_text(path, "1 2 3\n4 5 6 7 8\n");
+  expect_input_error([&] { io::read_uos_points(path); }, {at_line(path, 2), "found 5"});
+}
+
+TEST(UosPoints, ColumnCountMustStayTheSame) {
+  TempDir dir;
+  const auto path = dir / "scan000.3d";
+  write_text(path, "1 2 3\n1 2 3\n1 2 3 4\n");
+  expect_input_error([&] { io::read_uos_points(path); }, {at_line(path, 3), "expected 3 values as on line 1"});
+}
+
+TEST(UosPoints, NonFiniteOrOutOfRangeCoordinatesAreRefused) {
+  TempDir dir;
+  const auto path = dir / "scan000.3d";
+  for (const std::string bad : {"nan", "inf", "-inf", "NaN", "1e999", "1e39"}) {
+    write_text(path, "1 2 3\n4 " + bad + " 6\n");
+    expect_input_error([&] { io::read_uos_points(path); }, {at_line(path, 2)});
+  }
+  // Even as the very first line, a non-finite point is an error, not a tolerated header.
+  write_text(path, "nan 0 0\n1 2 3\n");
+  expect_input_error([&] { io::read_uos_points(path); }, {at_line(path, 1), "not finite"});
+}
+
+TEST(UosPoints, EmptyMissingAndCommentOnlyFilesAreRefused) {
+  TempDir dir;
+  const auto empty = dir / "empty.3d";
+  write_text(empty, "");
+  expect_input_error([&] { io::read_uos_points(empty); }, {empty.string(), "no points"});
+  const auto comments = dir / "comments.3d";
+  write_text(comments, "# nothing\n\n# slice 0\n");
+  expect_input_error([&] { io::read_uos_points(comments); }, {at_line(comments, 3), "no points"});
+  const auto missing = dir / "missing.3d";
+  expect_input_error([&] { io::read_uos_points(missing); }, {missing.string(), "cannot open"});
+  expect_input_error([&] { io::read_uos_points(dir.path()); }, {dir.path().string(), "folder"});
+}
+
+TEST(UosPoints, UnmarkedFilesSplitIntoFixedSlicesOnRequest) {
+  TempDir dir;
+  const auto path = dir / "scan000.3d";
+  std::string text;
+  for (int i = 0; i < 10; ++i) text += std::to_string(i) + " 0 0\n";
+  write_text(path, text);
+  io::ReadSettings settings;
+  settings.points_per_slice = 4;
+  EXPECT_EQ(io::read_uos_points(path, settings).slice_offsets, (std::vector<std::uint32_t>{0, 4, 8, 10}));
+  EXPECT_FALSE(io::read_uos_points(path).has_slices());
+  // Markers win over points_per_slice; points before the first marker form slice 0.
+  write_text(path, "1 1 1\n# slice 0\n2 2 2\n3 3 3\n#slice 1\n4 4 4\n# slice one\n5 5 5\n");
+  EXPECT_EQ(io::read_uos_points(path, settings).slice_offsets, (std::vector<std::uint32_t>{0, 1, 3, 5}));
+}
+
+TEST(UosPoints, RightHandedMetresBecome3dtkCentimetres) {
+  TempDir dir;
+  const auto path = dir / "scan000.3d";
+  write_text(path, "1 2 3\n");
+  io::ReadSettings settings;
+  settings.unit = LengthUnit::kMetre;
+  settings.right_handed_to_3dtk = true;
+  // x_3dtk = -100 y, y_3dtk = 100 z, z_3dtk = 100 x
+  EXPECT_EQ(io::read_uos_points(path, settings).points_cm[0], Eigen::Vector3f(-200.0f, 300.0f, 100.0f));
+}
+
+TEST(UosPoints, ParsingIgnoresTheProcessLocale) {
+  const char* locale = nullptr;
+  for (const char* name : {"de_DE.UTF-8", "de_DE.utf8", "fr_FR.UTF-8", "fr_FR.utf8"}) {
+    if (std::setlocale(LC_NUMERIC, name)) {
+      locale = name;
+      break;
+    }
+  }
+  if (!locale) GTEST_SKIP() << "no locale with a decimal comma installed";
+  TempDir dir;
+  const auto path = dir / "scan000.3d";
+  write_text(path, "1.5 2.25 -3.125\n");
+  const Scan scan = io::read_uos_points(path);
+  std::setlocale(LC_NUMERIC, "C");
+  EXPECT_EQ(scan.points_cm[0], Eigen::Vector3f(1.5f, 2.25f, -3.125f));
+}
+
+// ---- .pose and 3DTK's Euler convention ----------------------------------------------------------
+
+TEST(UosPose, EulerToPoseIsRxRyRzOn3dtkExample) {
+  // dat/scan001.pose from FORMATS-3DTK.md.
+  EulerPose euler;
+  euler.position_cm = Eigen::Vector3d(-3.10605, -7.50803, 156.917);
+  euler.angles_deg = Eigen::Vector3d(1.35694, -0.852409, -0.56224);
+  const Pose pose = euler_to_pose(euler);
+  EXPECT_TRUE((pose.block<3, 3>(0, 0).isApprox(rx_ry_rz(euler.angles_deg), 1e-14)));
+  EXPECT_EQ(Eigen::Vector3d(pose.col(3).head<3>()), euler.position_cm);
+  // 3DTK's column-major M[8] = sin(theta_y) sits in row 0, column 2.
+  EXPECT_NEAR(pose(0, 2), std::sin(euler.angles_deg.y() * kDegToRad), 1e-15);
+  // p_global = R p_local + t.
+  const Eigen::Vector3d p_local(100.0, -50.0, 1000.0);
+  const Eigen::Vector3d expected = rx_ry_rz(euler.angles_deg) * p_local + euler.position_cm;
+  EXPECT_TRUE((pose * p_local.homogeneous()).head<3>().isApprox(expected, 1e-14));
+  // And back.
+  const EulerPose again = pose_to_euler(pose);
+  EXPECT_TRUE(again.angles_deg.isApprox(euler.angles_deg, 1e-12));
+}
+
+TEST(UosPose, GimbalLockBranchFollows3dtk) {
+  // theta_y = 90 deg: only theta_x + theta_z is defined; 3DTK reports theta_x = 0.
+  EulerPose euler;
+  euler.angles_deg = Eigen::Vector3d(20.0, 90.0, 15.0);
+  const Pose pose = euler_to_pose(euler);
+  const EulerPose recovered = pose_to_euler(pose);
+  EXPECT_DOUBLE_EQ(recovered.angles_deg.x(), 0.0);
+  EXPECT_NEAR(recovered.angles_deg.y(), 90.0, 1e-9);
+  EXPECT_NEAR(recovered.angles_deg.z(), 35.0, 1e-9);
+  EXPECT_TRUE(euler_to_pose(recovered).isApprox(pose, 1e-12));
+  // theta_y = 89.9 deg (|cos| = 0.0017 <= 0.005) also takes 3DTK's branch, losing a little rotation.
+  euler.angles_deg = Eigen::Vector3d(20.0, 89.9, 15.0);
+  EXPECT_DOUBLE_EQ(pose_to_euler(euler_to_pose(euler)).angles_deg.x(), 0.0);
+}
+
+TEST(UosPose, ReadsThe3dtkExampleFile) {
+  TempDir dir;
+  const auto path = dir / "scan001.pose";
+  write_text(path, "-3.10605 -7.50803 156.917\n1.35694 -0.852409 -0.56224\n");
+  const EulerPose pose = io::read_uos_pose(path);
+  EXPECT_EQ(pose.position_cm, Eigen::Vector3d(-3.10605, -7.50803, 156.917));
+  EXPECT_EQ(pose.angles_deg, Eigen::Vector3d(1.35694, -0.852409, -0.56224));
+  EXPECT_TRUE(io::read_uos_pose(path, LengthUnit::kMetre).position_cm.isApprox(Eigen::Vector3d(-310.605, -750.803, 15691.7), 1e-15));
+  write_text(path, "-3.10605 -7.50803 156.917 1.35694 -0.852409 -0.56224");  // one line is fine too
+  EXPECT_EQ(io::read_uos_pose(path).angles_deg.z(), -0.56224);
+}
+
+TEST(UosPose, WritesTwoLinesAndRoundTripsExactlyEvenNearGimbalLock) {
+  TempDir dir;
+  const auto path = dir / "scan000.pose";
+  for (const Eigen::Vector3d& angles : {Eigen::Vector3d(1.35694, -0.852409, -0.56224), Eigen::Vector3d(-170, 45, 120),
+                                       Eigen::Vector3d(20, 89.9, 15), Eigen::Vector3d(-30, -90, 40),
+                                       Eigen::Vector3d(10, 100, -20)}) {
+    EulerPose euler;
+    euler.position_cm = Eigen::Vector3d(12345.678, -0.001, 98.5);
+    euler.angles_deg = angles;
+    const Pose pose = euler_to_pose(euler);
+    io::write_uos_pose(path, pose);
+    const std::string text = test::read_text(path);
+    EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 2) << text;
+    EXPECT_EQ(tokens_of(text).size(), 6u);
+    const Pose back = euler_to_pose(io::read_uos_pose(path));
+    EXPECT_LT((back - pose).cwiseAbs().maxCoeff(), 1e-9) << "angles " << angles.transpose() << "\n" << text;
+  }
+}
+
+TEST(UosPose, BadPoseFilesNameTheirLine) {
+  TempDir dir;
+  const auto path = dir / "scan000.pose";
+  write_text(path, "1 2 3\n4 5\n");
+  expect_input_error([&] { io::read_uos_pose(path); }, {at_line(path, 2), "found 5 numbers"});
+  write_text(path, "1 2 3\n4 5 6\n7\n");
+  expect_input_error([&] { io::read_uos_pose(path); }, {at_line(path, 3), "more than 6"});
+  write_text(path, "1 2 3\n4 nan 6\n");
+  expect_input_error([&] { io::read_uos_pose(path); }, {at_line(path, 2), "not finite"});
+  write_text(path, "1 2 three\n4 5 6\n");
+  expect_input_error([&] { io::read_uos_pose(path); }, {at_line(path, 1), "'three' is not a number"});
+  write_text(path, "");
+  expect_input_error([&] { io::read_uos_pose(path); }, {path.string(), "found 0 numbers"});
+}
+
+// ---- .frames -------------------------------------------------------------------------------------
+
+TEST(UosFrames, LinesAreColumnMajorWithTranslationLast) {
+  TempDir dir;
+  const auto path = dir / "scan000.frames";
+  Pose pose = Pose::Identity();
+  pose.block<3, 3>(0, 0) = rx_ry_rz(Eigen::Vector3d(10, -20, 30));
+  pose.col(3).head<3>() = Eigen::Vector3d(11, 22, 33);
+  const std::vector<io::FrameLine> frames{{pose, 3}};
+  io::write_uos_frames(path, frames);
+  const std::vector<std::string> tokens = tokens_of(test::read_text(path));
+  ASSERT_EQ(tokens.size(), 17u);
+  const double expected[16] = {pose(0, 0), pose(1, 0), pose(2, 0), 0,  // R11 R21 R31 0
+                               pose(0, 1), pose(1, 1), pose(2, 1), 0,  // R12 R22 R32 0
+                               pose(0, 2), pose(1, 2), pose(2, 2), 0,  // R13 R23 R33 0
+                               11,         22,         33,         1};
+  for (int i = 0; i < 16; ++i) EXPECT_EQ(std::stod(tokens[static_cast<std::size_t>(i)]), expected[i]) << "token " << i;
+  EXPECT_EQ(tokens[16], "3");
+  EXPECT_NE(pose(1, 0), pose(0, 1));  // the check above would not see a transposition otherwise
+}
+
+TEST(UosFrames, RoundTripKeepsEveryLineAndTheLastIsTheFinalPose) {
+  TempDir dir;
+  const auto path = dir / "scan001.frames";
+  std::vector<io::FrameLine> frames;
+  for (int k = 0; k < 4; ++k) {
+    EulerPose euler;
+    euler.position_cm = Eigen::Vector3d(10.0 * k, -3.5 * k, 1000.25);
+    euler.angles_deg = Eigen::Vector3d(5.0 * k, -7.0 * k, 1.5 * k);
+    frames.push_back({euler_to_pose(euler), k % 5});
+  }
+  io::write_uos_frames(path, frames, LengthUnit::kMetre);
+  const auto back = io::read_uos_frames(path, LengthUnit::kMetre);
+  ASSERT_EQ(back.size(), frames.size());
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    EXPECT_LT((back[k].pose_cm - frames[k].pose_cm).cwiseAbs().maxCoeff(), 1e-9);
+    EXPECT_EQ(back[k].type, frames[k].type);
+  }
+  EXPECT_EQ(back.back().pose_cm.col(3), frames.back().pose_cm.col(3));
+}
+
+TEST(UosFrames, Reads3dtkSixDigitLinesSkippingBlanksAndComments) {
+  TempDir dir;
+  const auto path = dir / "scan001.frames";
+  EulerPose euler;
+  euler.position_cm = Eigen::Vector3d(-3.10605, -7.50803, 156.917);
+  euler.angles_deg = Eigen::Vector3d(1.35694, -0.852409, -0.56224);
+  const Pose pose = euler_to_pose(euler);
+  // As 3DTK's operator<< writes it: 6 significant digits, column-major, then the type.
+  std::string line;
+  for (int col = 0; col < 4; ++col) {
+    for (int row = 0; row < 4; ++row) {
+      char buffer[32];
+      std::snprintf(buffer, sizeof buffer, "%g ", pose(row, col));
+      line += buffer;
+    }
+  }
+  write_text(path, "# written by 3DTK\n" + line + "1\n\n" + line + "2\n");
+  const auto frames = io::read_uos_frames(path);
+  ASSERT_EQ(frames.size(), 2u);
+  EXPECT_EQ(frames[1].type, 2);
+  EXPECT_LT((frames[1].pose_cm - pose).cwiseAbs().maxCoeff(), 1e-4);
+  const Eigen::Matrix3d r = frames[1].pose_cm.block<3, 3>(0, 0);
+  EXPECT_LT((r * r.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff(), 1e-12);  // re-orthonormalised
+}
+
+TEST(UosFrames, BadLinesNameTheirLine) {
+  TempDir dir;
+  const auto path = dir / "scan000.frames";
+  const std::string identity = "1 0 0 0 0 1 0 0 0 0 1 0 5 6 7 1";
+  write_text(path, identity + " 1\n" + identity + "\n");
+  expect_input_error([&] { io::read_uos_frames(path); }, {at_line(path, 2), "found 16"});
+  write_text(path, identity + " 1\n\n1.01 0 0 0 0 1 0 0 0 0 1 0 5 6 7 1 1\n");
+  expect_input_error([&] { io::read_uos_frames(path); }, {at_line(path, 3), "not orthonormal"});
+  write_text(path, "-1 0 0 0 0 1 0 0 0 0 1 0 5 6 7 1 1\n");
+  expect_input_error([&] { io::read_uos_frames(path); }, {at_line(path, 1), "reflection"});
+  write_text(path, identity + " 9\n");
+  expect_input_error([&] { io::read_uos_frames(path); }, {at_line(path, 1), "frame type"});
+  write_text(path, "1 0 0 0 0 1 0 0 0 0 1 0 5 inf 7 1 1\n");
+  expect_input_error([&] { io::read_uos_frames(path); }, {at_line(path, 1), "not finite"});
+  write_text(path, "1 0 0 0.5 0 1 0 0 0 0 1 0 5 6 7 1 1\n");
+  expect_input_error([&] { io::read_uos_frames(path); }, {at_line(path, 1), "0 0 0 1"});
+  write_text(path, "# only a comment\n");
+  expect_input_error([&] { io::read_uos_frames(path); }, {path.string(), "no frames"});
+}
+
+}  // namespace
+}  // namespace minemap
