@@ -37,7 +37,7 @@ struct MapOptions {
   std::string backend = "auto";
   bool no_filter = false;
   float max_pair_dist_cm = 25.0f;
-  float refine_pair_dist_cm = minemap::MappingSettings{}.icp.refine_max_pair_dist_cm;
+  float refine_pair_dist_cm = -1.0f;  // < 0: 0.4 x max_pair_dist_cm (10 cm for the default 25 cm)
   int max_iterations = 100;
   double min_step_cm = minemap::IcpSettings{}.min_translation_step_cm;
   double min_step_deg = minemap::IcpSettings{}.min_rotation_step_deg;
@@ -113,7 +113,8 @@ int run_map(const MapOptions& options) {
   settings.filter_enabled = !options.no_filter;
   settings.icp.max_pair_dist_cm = options.max_pair_dist_cm;
   settings.icp.max_iterations = options.max_iterations;
-  settings.icp.refine_max_pair_dist_cm = options.refine_pair_dist_cm;
+  settings.icp.refine_max_pair_dist_cm =
+      options.refine_pair_dist_cm < 0.0f ? 0.4f * options.max_pair_dist_cm : options.refine_pair_dist_cm;
   settings.icp.min_translation_step_cm = options.min_step_cm;
   settings.icp.min_rotation_step_deg = options.min_step_deg;
   settings.tree.bucket_size = options.bucket_size;
@@ -206,8 +207,7 @@ int main(int argc, char** argv) {
   map_cmd->add_flag("--no-filter", map.no_filter, "Skip the slice filter (median + reduction + every 3rd slice)");
   map_cmd->add_option("--max-pair-dist-cm", map.max_pair_dist_cm, "Maximum point-pair distance")->capture_default_str();
   map_cmd->add_option("--refine-pair-dist-cm", map.refine_pair_dist_cm,
-                      "After converging, refine with this tighter pair bound (0 = off)")
-      ->capture_default_str();
+                      "After converging, refine with this tighter pair bound (0 = off; default 0.4 x the pair bound)");
   map_cmd->add_option("--max-iterations", map.max_iterations, "ICP iteration cap")->capture_default_str();
   map_cmd->add_option("--min-step-cm", map.min_step_cm, "ICP converged: a step moves less than this...")
       ->capture_default_str();

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Runs the benchmark suite and writes the paper's Table I, Fig. 5 and the search throughput table.
+# Usage: bench/run_benchmarks.sh [--quick] [--no-build] [--out DIR]
+#   --quick     2-core CI timing study (< 3 min): fewer rows, 5 repetitions, medians and spread
+#   --no-build  use an existing build/ (the GPU machine: nothing is built there)
+# Output (default out/bench): *.json (Google Benchmark), table1.md, fig5.csv, fig5.png, search.md
+set -euo pipefail
+cd "$(dirname "$0")/.."
+quick=0; build=1; out=out/bench
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --quick) quick=1 ;;
+    --no-build) build=0 ;;
+    --out) out="$2"; shift ;;
+    *) echo "usage: $0 [--quick] [--no-build] [--out DIR]" >&2; exit 2 ;;
+  esac
+  shift
+done
+if [ "$build" = 1 ]; then
+  scripts/install-deps.sh bench
+  cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_BENCH=ON >/dev/null
+  cmake --build build -j"$(nproc)" --target bench_search bench_table1
+fi
+mkdir -p "$out"
+if [ "$quick" = 1 ]; then
+  reps=(--benchmark_repetitions=5 --benchmark_report_aggregates_only=false)
+  build/bench/bench_search --benchmark_filter='NearestNeighbour|SliceFilter' "${reps[@]}" \
+    --benchmark_out="$out/search.json" --benchmark_out_format=json
+  MINEMAP_BENCH_SLAM_SCANS=6 build/bench/bench_table1 \
+    --benchmark_filter='Table1_Pair/mine/cpu/(all_kd|reduced_apx)|Table1_Pair/lidar/cpu/reduced_apx' "${reps[@]}" \
+    --benchmark_out="$out/table1.json" --benchmark_out_format=json
+else
+  build/bench/bench_search --benchmark_out="$out/search.json" --benchmark_out_format=json
+  build/bench/bench_table1 --benchmark_out="$out/table1.json" --benchmark_out_format=json
+fi
+python3 bench/make_tables.py "$out"
