@@ -42,8 +42,8 @@ struct MappingSettings {
     return defaults;
   }();
   int min_overlap_pairs = 250;            ///< the paper: overlap iff more than 250 pairs
-  double moved_translation_cm = 2.0;      ///< step 3c: a match "moved" the scan beyond this...
-  double moved_rotation_deg = 0.1;        ///< ...or this
+  double moved_translation_cm = 5.0;      ///< step 3c: a match "moved" the scan beyond this...
+  double moved_rotation_deg = 0.25;       ///< ...or this (see docs/benchmarks.md for the trade-off)
   int max_relaxation_matches_per_scan = 0;  ///< cap on step-3 matches after one new scan; 0 = 4 x scans so far
 };
 
