@@ -44,11 +44,14 @@ def seconds(b):
 
 
 def summary(runs):
+    """Median time and spread (max - min; None for a single run)."""
     times = [seconds(b) for b in runs]
-    return statistics.median(times), (max(times) - min(times)) if len(times) > 1 else 0.0
+    return statistics.median(times), (max(times) - min(times)) if len(times) > 1 else None
 
 
 def fmt_time(s):
+    if s is None:
+        return "—"
     if s >= 3600:
         return f"{int(s // 3600)} h {int(s % 3600 // 60)} min"
     if s >= 60:

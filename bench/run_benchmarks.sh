@@ -33,4 +33,6 @@ else
   build/bench/bench_search --benchmark_out="$out/search.json" --benchmark_out_format=json
   build/bench/bench_table1 --benchmark_out="$out/table1.json" --benchmark_out_format=json
 fi
-python3 bench/make_tables.py "$out"
+# Debian's python3 has python3-matplotlib (Fig. 5's PNG); a python3 earlier on PATH may not.
+python=python3; [ -x /usr/bin/python3 ] && python=/usr/bin/python3
+"$python" bench/make_tables.py "$out"
