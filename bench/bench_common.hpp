@@ -5,7 +5,10 @@
 #include <memory>
 #include <vector>
 
+#include <benchmark/benchmark.h>
+
 #include "minemap/filter/slice_filter.hpp"
+#include "minemap/search/pairing.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/sim/mine_simulator.hpp"
 
@@ -25,6 +28,16 @@ inline const SimulatedPair& simulated_pair() {
     return SimulatedPair{survey.scans[0], survey.scans[1], survey.truth_cm[0], survey.truth_cm[1]};
   }();
   return pair;
+}
+
+/// The requested backend, or nullptr after marking the benchmark skipped (e.g. no OpenCL).
+inline std::unique_ptr<PairingBackend> backend_or_skip(benchmark::State& state, Backend backend) {
+  try {
+    return make_pairing_backend(backend).backend;
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
+    return nullptr;
+  }
 }
 
 inline std::filesystem::path shared_data() { return MINEMAP_SHARED_DATA_DIR; }

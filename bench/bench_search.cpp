@@ -94,13 +94,8 @@ BENCHMARK(BM_NearestNeighbour_nanoflann_tbb)->Unit(benchmark::kMillisecond)->Use
 
 void BM_NearestNeighbour_minemap(benchmark::State& state, Backend backend, SearchMethod method) {
   const auto& pair = fast_gicp_pair();
-  std::unique_ptr<PairingBackend> pairing;
-  try {
-    pairing = make_pairing_backend(backend).backend;
-  } catch (const std::exception& e) {
-    state.SkipWithError(e.what());
-    return;
-  }
+  auto pairing = backend_or_skip(state, backend);
+  if (!pairing) return;
   auto model = pairing->prepare(pair.target.points_cm, {});
   auto data = pairing->prepare(pair.source.points_cm, {});
   const ModelPlacement placement{model.get(), Pose::Identity()};

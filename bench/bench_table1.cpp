@@ -65,13 +65,8 @@ enum class Row { kAllBrute, kAllKd, kAllApx, kReducedApx };
 
 void BM_Table1_Pair(benchmark::State& state, std::string data, Backend backend, Row row) {
   const PairInput& in = pair_input(data);
-  std::unique_ptr<PairingBackend> pairing;
-  try {
-    pairing = make_pairing_backend(backend).backend;
-  } catch (const std::exception& e) {
-    state.SkipWithError(e.what());
-    return;
-  }
+  auto pairing = backend_or_skip(state, backend);
+  if (!pairing) return;
   const bool reduced = row == Row::kReducedApx;
   IcpSettings icp;
   icp.method = row == Row::kAllBrute ? SearchMethod::kBruteForce

@@ -12,21 +12,15 @@ std::optional<SliceFilterResult> filter_scan_opencl(const Scan& scan, const Slic
   settings.validate();
   auto runtime = Runtime::get(allow_cpu_device, why_not);
   if (!runtime) return std::nullopt;
+  if (!scan.has_slices()) return unfiltered_result(scan, "opencl");
   SliceFilterResult result;
   result.backend = "opencl";
   result.points_in = scan.size();
-  if (!scan.has_slices()) {
-    result.points_cm = scan.points_cm;
-    result.points_in_kept_slices = scan.size();
-    result.slice_offsets = {0, static_cast<std::uint32_t>(scan.size())};
-    return result;
-  }
+  const std::vector<std::size_t> kept_indices = kept_slice_indices(scan, settings);
   if (scan.empty()) {
     // Slices without points (no returns): one empty output slice per kept slice, as on the CPU;
     // nothing to launch (OpenCL rejects zero-size buffers).
-    const std::size_t kept = (scan.num_slices() + static_cast<std::size_t>(settings.slice_stride) - 1) /
-                             static_cast<std::size_t>(settings.slice_stride);
-    result.slice_offsets.assign(kept + 1, 0);
+    result.slice_offsets.assign(kept_indices.size() + 1, 0);
     return result;
   }
   try {
@@ -41,16 +35,14 @@ std::optional<SliceFilterResult> filter_scan_opencl(const Scan& scan, const Slic
       points[i] = cl_float4{{scan.points_cm[i].x(), scan.points_cm[i].y(), scan.points_cm[i].z(), 0.0f}};
     }
     std::vector<cl_int> offsets(scan.slice_offsets.begin(), scan.slice_offsets.end());
-    std::vector<cl_int> kept;
-    for (std::size_t s = 0; s < scan.num_slices(); s += static_cast<std::size_t>(settings.slice_stride)) {
-      kept.push_back(static_cast<cl_int>(s));
-    }
+    const std::vector<cl_int> kept(kept_indices.begin(), kept_indices.end());
     auto& context = runtime->context();
     const std::size_t point_bytes = points.size() * sizeof(cl_float4);
     cl::Buffer in(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, point_bytes, points.data());
     cl::Buffer slice_offsets(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, offsets.size() * sizeof(cl_int),
                              offsets.data());
-    cl::Buffer kept_slices(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, kept.size() * sizeof(cl_int), kept.data());
+    cl::Buffer kept_slices(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, kept.size() * sizeof(cl_int),
+                           const_cast<cl_int*>(kept.data()));
     cl::Buffer out(context, CL_MEM_WRITE_ONLY, point_bytes);
     cl::Buffer counts(context, CL_MEM_WRITE_ONLY, kept.size() * sizeof(cl_int));
     cl::Buffer replaced(context, CL_MEM_WRITE_ONLY, kept.size() * sizeof(cl_int));

@@ -41,6 +41,12 @@ struct SliceFilterResult {
   std::string backend;                        ///< "cpu" or "opencl"
 };
 
+/// The result for a scan without slices: its points unchanged, as one output slice.
+SliceFilterResult unfiltered_result(const Scan& scan, const std::string& backend);
+
+/// Indices of the slices that go to matching: 0, stride, 2 * stride, ...
+std::vector<std::size_t> kept_slice_indices(const Scan& scan, const SliceFilterSettings& settings);
+
 /// CPU reference. A scan without slices is returned unchanged (the dispatch `filter_scan` says so
 /// in its note).
 SliceFilterResult filter_scan_cpu(const Scan& scan, const SliceFilterSettings& settings);

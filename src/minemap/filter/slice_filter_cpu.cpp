@@ -125,19 +125,29 @@ void SliceFilterSettings::validate() const {
   if (slice_stride < 1) throw std::invalid_argument("slice stride must be >= 1");
 }
 
+SliceFilterResult unfiltered_result(const Scan& scan, const std::string& backend) {
+  SliceFilterResult result;
+  result.backend = backend;
+  result.points_in = scan.size();
+  result.points_cm = scan.points_cm;
+  result.points_in_kept_slices = scan.size();
+  result.slice_offsets = {0, static_cast<std::uint32_t>(scan.size())};
+  return result;
+}
+
+std::vector<std::size_t> kept_slice_indices(const Scan& scan, const SliceFilterSettings& settings) {
+  std::vector<std::size_t> kept;
+  for (std::size_t s = 0; s < scan.num_slices(); s += static_cast<std::size_t>(settings.slice_stride)) kept.push_back(s);
+  return kept;
+}
+
 SliceFilterResult filter_scan_cpu(const Scan& scan, const SliceFilterSettings& settings) {
   settings.validate();
+  if (!scan.has_slices()) return unfiltered_result(scan, "cpu");
   SliceFilterResult result;
   result.backend = "cpu";
   result.points_in = scan.size();
-  if (!scan.has_slices()) {
-    result.points_cm = scan.points_cm;
-    result.points_in_kept_slices = scan.size();
-    result.slice_offsets = {0, static_cast<std::uint32_t>(scan.size())};
-    return result;
-  }
-  std::vector<std::size_t> kept;
-  for (std::size_t s = 0; s < scan.num_slices(); s += static_cast<std::size_t>(settings.slice_stride)) kept.push_back(s);
+  const std::vector<std::size_t> kept = kept_slice_indices(scan, settings);
   std::vector<SliceOutput> outputs(kept.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, kept.size()), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t k = range.begin(); k != range.end(); ++k) outputs[k] = filter_slice(scan.slice(kept[k]), settings);
