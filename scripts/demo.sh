@@ -6,7 +6,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh build
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_TESTS=OFF -DMINEMAP_BUILD_BENCH=OFF >/dev/null
+# Same build folder and options as the test command; only the program is built here.
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j"$(nproc)" --target minemap_cli
 mkdir -p out
 build/minemap simulate --out out/demo-survey

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
+#include <cstdlib>
 #include <fstream>
 
 #include "minemap/io/formats.hpp"
@@ -100,6 +101,21 @@ TEST(MappingBackends, OpenClAndCpuGiveTheSamePoses) {
     EXPECT_LT(translation_norm(difference), 0.01) << "scan " << i << " (cm)";
     EXPECT_LT(rotation_angle_deg(difference), 0.001) << "scan " << i << " (deg)";
   }
+}
+
+TEST(MappingBackends, AnOpenClFailureMidRunFallsBackToTheCpuPoses) {
+  const auto survey = small_survey(4, 5);
+  MappingSettings settings;
+  settings.backend = Backend::kCpu;
+  const auto cpu = map_survey(survey.scans, settings);
+  ::setenv("MINEMAP_OPENCL_INJECT_FAULT", "20", 1);  // the 20th pairing call fails
+  settings.backend = Backend::kOpenCl;
+  const auto recovered = map_survey(survey.scans, settings);
+  ::unsetenv("MINEMAP_OPENCL_INJECT_FAULT");
+  ASSERT_EQ(recovered.notes.size(), 1u);
+  EXPECT_NE(recovered.notes.front().find("CL_OUT_OF_RESOURCES"), std::string::npos) << recovered.notes.front();
+  EXPECT_NE(recovered.backend.find("cpu"), std::string::npos);
+  for (std::size_t i = 0; i < cpu.scans.size(); ++i) EXPECT_EQ(cpu.scans[i].pose_cm, recovered.scans[i].pose_cm) << i;
 }
 
 /// Reads a 4x4 text matrix (relative.txt).

@@ -3,6 +3,7 @@
 // launches) and one reduction kernel, then reads back 64 x 17 floats of partial sums, which the host
 // adds in double in group order (deterministic, no float atomics).
 #include <array>
+#include <cstdlib>
 #include <vector>
 
 #include "minemap/opencl/opencl_backend.hpp"
@@ -68,6 +69,9 @@ class OpenClPreparedCloud final : public PreparedCloud {
 class OpenClPairingBackend final : public PairingBackend {
  public:
   explicit OpenClPairingBackend(std::shared_ptr<Runtime> runtime) : runtime_(std::move(runtime)) {
+    // Fault injection for tests of the CPU fallback: MINEMAP_OPENCL_INJECT_FAULT=N makes the N-th
+    // pairing call fail as an out-of-resources launch would.
+    if (const char* fault = std::getenv("MINEMAP_OPENCL_INJECT_FAULT")) inject_fault_at_ = std::atol(fault);
     try {
       nearest_in_tree_ = cl::Kernel(runtime_->program(), "nearest_in_tree");
       nearest_brute_force_ = cl::Kernel(runtime_->program(), "nearest_brute_force");
@@ -102,6 +106,9 @@ class OpenClPairingBackend final : public PairingBackend {
                         const PairingSettings& settings) override {
     PairSums total;
     total.reference_cm = data.centroid_cm();
+    if (inject_fault_at_ > 0 && ++pairing_calls_ == inject_fault_at_) {
+      throw DeviceError("clEnqueueNDRangeKernel: CL_OUT_OF_RESOURCES (injected by MINEMAP_OPENCL_INJECT_FAULT)");
+    }
     const auto& cloud = as_device(data);
     const auto n = static_cast<cl_int>(data.points().size());
     try {
@@ -233,6 +240,8 @@ class OpenClPairingBackend final : public PairingBackend {
   }
 
   std::shared_ptr<Runtime> runtime_;
+  long inject_fault_at_ = 0;
+  long pairing_calls_ = 0;
   cl::Kernel nearest_in_tree_, nearest_brute_force_, pair_sums_;
   std::size_t reduction_group_size_ = kReductionGroupSize;
   cl::Buffer partials_;

@@ -15,12 +15,14 @@
 #include <stdexcept>
 #include <string>
 
+#include "minemap/search/pairing.hpp"
+
 namespace minemap::opencl {
 
 /// An OpenCL failure, with the call and the error's name ("clEnqueueNDRangeKernel: CL_OUT_OF_RESOURCES").
-class DeviceError : public std::runtime_error {
+class DeviceError : public BackendError {
  public:
-  using std::runtime_error::runtime_error;
+  using BackendError::BackendError;
 };
 
 const char* error_name(cl_int code);

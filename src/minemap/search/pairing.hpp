@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -21,6 +22,13 @@
 #include "minemap/search/kdtree.hpp"
 
 namespace minemap {
+
+/// A backend failed while running (an OpenCL device ran out of resources or was lost). Callers
+/// that can redo their work on the CPU catch this and fall back.
+class BackendError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
 
 /// How a closest point is found (Table I of the paper).
 enum class SearchMethod {

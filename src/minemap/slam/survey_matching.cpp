@@ -31,8 +31,22 @@ class SurveyMatcher {
     backend_ = std::move(choice.backend);
     result_.backend = backend_->name() + ": " + backend_->device_description();
     result_.backend_note = choice.message;
-    prepare_all();
-    match_all();
+    try {
+      prepare_all();
+      match_all();
+    } catch (const BackendError& e) {
+      // The device failed mid-run: redo everything on the CPU, which gives the CPU run's poses.
+      const std::string warning = std::string("OpenCL failed (") + e.what() + "); the survey was matched again on the CPU";
+      result_ = MappingResult{};
+      notes_seen_.clear();
+      unstructured_noted_ = false;
+      backend_ = make_cpu_pairing_backend();
+      result_.backend = backend_->name() + ": " + backend_->device_description();
+      result_.backend_note = warning;
+      result_.notes.push_back(warning);
+      prepare_all();
+      match_all();
+    }
     return std::move(result_);
   }
 
