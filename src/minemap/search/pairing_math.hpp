@@ -82,12 +82,12 @@ inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& b
       node = go_left ? n.a : n.b;
     }
     const KdNode& leaf = nodes[node];
+    // Branch-free update (selects, not jumps): whether a bucket point is closer is unpredictable.
     for (std::int32_t i = leaf.a, end = leaf.a + leaf.b; i < end; ++i) {
       const float d = squared_distance(points[i], q);
-      if (d < best) {
-        best = d;
-        best_point = i;
-      }
+      const bool closer = d < best;
+      best = closer ? d : best;
+      best_point = closer ? i : best_point;
     }
     do {
       if (top == 0) return;
