@@ -6,12 +6,14 @@
 
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
 
 #include "minemap/core/error.hpp"
 #include "minemap/io/formats.hpp"
+#include "minemap/search/pairing.hpp"
 #include "minemap/sim/mine_simulator.hpp"
 #include "minemap/slam/map_output.hpp"
 #include "minemap/slam/survey_matching.hpp"
@@ -190,6 +192,9 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   int threads = 0;
   app.add_option("--threads", threads, "Worker threads (0 = all cores)");
+  std::string opencl_device;
+  app.add_option("--opencl-device", opencl_device,
+                 "OpenCL device: a substring of 'platform / device' (same as MINEMAP_OPENCL_DEVICE)");
 
   SimulateOptions sim;
   auto* simulate = app.add_subcommand("simulate", "Write the built-in simulated mine survey (uos format)");
@@ -237,6 +242,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : exit_code(ExitCode::kUsage);
   }
+  // The runtime reads the choice from the environment when it first starts, so the flag sets it.
+  if (!opencl_device.empty()) ::setenv("MINEMAP_OPENCL_DEVICE", opencl_device.c_str(), 1);
   try {
     const int max_threads = tbb::info::default_concurrency();
     tbb::task_arena arena(threads > 0 ? std::min(threads, max_threads) : max_threads);
@@ -250,6 +257,9 @@ int main(int argc, char** argv) {
   } catch (const minemap::OutputError& e) {
     std::cerr << "minemap: " << e.what() << "\n";
     return exit_code(ExitCode::kOutputError);
+  } catch (const minemap::BackendError& e) {
+    std::cerr << "minemap: " << e.what() << "\n";
+    return exit_code(ExitCode::kBackendUnavailable);
   } catch (const std::invalid_argument& e) {
     std::cerr << "minemap: " << e.what() << "\n";
     return exit_code(ExitCode::kUsage);

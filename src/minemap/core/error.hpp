@@ -16,6 +16,7 @@ enum class ExitCode : int {
   kInputError = 3,          ///< a malformed, truncated or unreadable input file
   kRegistrationFailed = 4,  ///< too few pairs, divergence, NaN: no pose is returned silently
   kOutputError = 5,         ///< the output folder could not be written
+  kBackendUnavailable = 6,  ///< --backend opencl was asked for and no usable OpenCL device exists
   kInterrupted = 130,       ///< SIGINT: finished outputs are kept, temp files removed
 };
 

@@ -80,7 +80,7 @@ BackendChoice make_pairing_backend(Backend requested) {
     choice.message = "OpenCL backend: " + choice.backend->device_description();
     return choice;
   }
-  if (requested == Backend::kOpenCl) throw std::runtime_error("OpenCL backend unavailable: " + why_not);
+  if (requested == Backend::kOpenCl) throw BackendError("OpenCL backend unavailable: " + why_not);
   choice.backend = make_cpu_pairing_backend();
   choice.message = "CPU backend (TBB): " + why_not;
   return choice;

@@ -122,7 +122,7 @@ struct BackendChoice {
   std::string message;  ///< e.g. why OpenCL was not used
 };
 
-/// The dispatch point. kCpu: TBB. kOpenCl: OpenCL or throws std::runtime_error saying why not.
+/// The dispatch point. kCpu: TBB. kOpenCl: OpenCL or throws BackendError saying why not.
 /// kAuto: OpenCL on a GPU device if one works, else the CPU path (PoCL on a 2-core CPU is slower
 /// than TBB), with the reason in `message`.
 BackendChoice make_pairing_backend(Backend requested);

@@ -1,0 +1,75 @@
+// The `minemap` program's contract: outputs, exit codes, and messages that name file and line.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "test_support.hpp"
+
+namespace minemap {
+namespace {
+
+using test::run_cli;
+using test::TempDir;
+
+TEST(Cli, SimulateThenMapWritesEveryOutputAndReportsTruthErrors) {
+  TempDir dir;
+  std::string output;
+  ASSERT_EQ(run_cli("simulate --out " + (dir / "survey").string() + " --scans 3", &output), 0) << output;
+  ASSERT_EQ(run_cli("map " + (dir / "survey").string() + " --out " + (dir / "out").string() + " --backend cpu", &output), 0)
+      << output;
+  EXPECT_NE(output.find("pose error against the reference poses"), std::string::npos) << output;
+  for (const char* name : {"scan000.frames", "scan002.pose", "trajectory.tum", "map.ply", "report.json", "top.png", "side.png"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir / "out" / name)) << name;
+  }
+  std::ifstream in(dir / "out" / "report.json");
+  const auto report = nlohmann::json::parse(in);
+  ASSERT_EQ(report["scans"].size(), 3u);
+  for (const auto& scan : report["scans"]) {
+    for (const char* key : {"name", "pose", "iterations", "pairs", "rms", "converged"}) EXPECT_TRUE(scan.contains(key)) << key;
+    EXPECT_EQ(scan["pose"].size(), 4u);
+  }
+  EXPECT_TRUE(report.contains("truth"));
+  EXPECT_TRUE(report["timings_s"].contains("relaxation"));
+  // No temp file is left behind.
+  for (const auto& entry : std::filesystem::directory_iterator(dir / "out")) {
+    EXPECT_EQ(entry.path().filename().string().find(".minemap-tmp-"), std::string::npos) << entry.path();
+  }
+}
+
+TEST(Cli, BadInputNamesFileAndLineAndLeavesTheOutputFolderAsItWas) {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "survey");
+  test::write_text(dir / "survey" / "scan000.3d", "1 2 3\n4 5 6\n");
+  test::write_text(dir / "survey" / "scan000.pose", "0 0 0\n0 0 0\n");
+  test::write_text(dir / "survey" / "scan001.3d", "1 2 3\n4 five 6\n");
+  test::write_text(dir / "survey" / "scan001.pose", "0 0 0\n0 0 0\n");
+  std::filesystem::create_directories(dir / "out");
+  test::write_text(dir / "out" / "keep.txt", "previous result");
+  std::string output;
+  const int code = run_cli("map " + (dir / "survey").string() + " --out " + (dir / "out").string(), &output);
+  EXPECT_EQ(code, 3) << output;
+  EXPECT_NE(output.find("scan001.3d:2:"), std::string::npos) << output;
+  std::vector<std::string> names;
+  for (const auto& entry : std::filesystem::directory_iterator(dir / "out")) names.push_back(entry.path().filename());
+  EXPECT_EQ(names, std::vector<std::string>{"keep.txt"});
+  EXPECT_EQ(test::read_text(dir / "out" / "keep.txt"), "previous result");
+}
+
+TEST(Cli, UsageAndBackendErrorsHaveTheirOwnExitCodes) {
+  TempDir dir;
+  std::string output;
+  EXPECT_EQ(run_cli("map", &output), 2) << output;
+  EXPECT_EQ(run_cli("map " + dir.path().string() + " --out " + (dir / "o").string() + " --mode sideways", &output), 2)
+      << output;
+  ASSERT_EQ(run_cli("simulate --out " + (dir / "s").string() + " --scans 2", &output), 0) << output;
+  EXPECT_EQ(run_cli("--opencl-device no-such-device map " + (dir / "s").string() + " --out " + (dir / "o").string() +
+                        " --backend opencl --quiet",
+                    &output),
+            6)
+      << output;
+  EXPECT_NE(output.find("no-such-device"), std::string::npos) << output;
+}
+
+}  // namespace
+}  // namespace minemap
