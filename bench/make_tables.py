@@ -151,6 +151,20 @@ def search(out, context, runs):
     plt.savefig(os.path.join(out, "fig5.png"), dpi=120)
 
 
+def peers(out, context, runs):
+    lines = ["# Peers on the same pair and settings", "",
+             "fast_gicp_pair, all points, exact closest points within 25 cm, point-to-point, same start.", "",
+             "| implementation | time | ICP iterations | pose distance to minemap | minemap speed-up |", "|---|---|---|---|---|"]
+    base = next((summary(b)[0] for k, b in runs.items() if "minemap" in k), None)
+    for name, b in sorted(runs.items()):
+        median, _ = summary(b)
+        it = int(b[0]["icp_iterations"])
+        lines.append(f"| {name.split('/')[0].replace('BM_Peers_', '')} | {fmt_time(median)} | {it if it >= 0 else 'not reported'} | "
+                     f"{b[0]['to_minemap_cm']:.2g} cm, {b[0]['to_minemap_deg']:.2g} deg | "
+                     f"{(median / base) if base else float('nan'):.2f}x |")
+    open(os.path.join(out, "peers.md"), "w").write("\n".join(lines) + "\n")
+
+
 def main(out):
     context, runs = load(os.path.join(out, "table1.json"))
     if runs:
@@ -158,7 +172,10 @@ def main(out):
     context, runs = load(os.path.join(out, "search.json"))
     if runs:
         search(out, context, runs)
-    for name in ("table1.md", "search.md"):
+    context, runs = load(os.path.join(out, "peers.json"))
+    if runs:
+        peers(out, context, runs)
+    for name in ("table1.md", "search.md", "peers.md"):
         path = os.path.join(out, name)
         if os.path.exists(path):
             print(open(path).read())

@@ -20,6 +20,7 @@ if [ "$build" = 1 ]; then
   scripts/install-deps.sh bench
   cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_BENCH=ON >/dev/null
   cmake --build build -j"$(nproc)" --target bench_search bench_table1
+  cmake --build build -j"$(nproc)" --target bench_peers 2>/dev/null || echo "bench_peers not built (no Open3D)"
 fi
 mkdir -p "$out"
 if [ "$quick" = 1 ]; then
@@ -32,6 +33,9 @@ if [ "$quick" = 1 ]; then
 else
   build/bench/bench_search --benchmark_out="$out/search.json" --benchmark_out_format=json
   build/bench/bench_table1 --benchmark_out="$out/table1.json" --benchmark_out_format=json
+  if [ -x build/bench/bench_peers ]; then
+    OMP_NUM_THREADS="$(nproc)" build/bench/bench_peers --benchmark_out="$out/peers.json" --benchmark_out_format=json
+  fi
 fi
 # Debian's python3 has python3-matplotlib (Fig. 5's PNG); a python3 earlier on PATH may not.
 python=python3; [ -x /usr/bin/python3 ] && python=/usr/bin/python3
