@@ -1,6 +1,10 @@
 // The `minemap` program's contract: outputs, exit codes, and messages that name file and line.
 #include <gtest/gtest.h>
 
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <fstream>
 #include <nlohmann/json.hpp>
 
@@ -69,6 +73,34 @@ TEST(Cli, UsageAndBackendErrorsHaveTheirOwnExitCodes) {
             6)
       << output;
   EXPECT_NE(output.find("no-such-device"), std::string::npos) << output;
+}
+
+TEST(Cli, SigintStopsMappingWithExit130AndNoTempFiles) {
+  TempDir dir;
+  std::string output;
+  ASSERT_EQ(run_cli("simulate --out " + (dir / "s").string() + " --scans 20", &output), 0) << output;
+  // Brute-force pairing makes the run long (about 15 s here, 20 scans x 5 iterations), so the
+  // signal lands mid-run even on a machine ten times faster.
+  const std::string command = std::string(MINEMAP_CLI_PATH) + " map " + (dir / "s").string() + " --out " +
+                              (dir / "o").string() + " --backend cpu --quiet --mode pairwise --search brute" +
+                              " --max-iterations 5";
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    ::execl("/bin/sh", "sh", "-c", ("exec " + command).c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ::usleep(1000 * 1000);
+  ::kill(child, SIGINT);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  if (std::filesystem::exists(dir / "o")) {
+    for (const auto& entry : std::filesystem::directory_iterator(dir / "o")) {
+      EXPECT_EQ(entry.path().filename().string().find(".minemap-tmp-"), std::string::npos) << entry.path();
+    }
+  }
 }
 
 }  // namespace

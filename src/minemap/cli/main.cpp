@@ -2,15 +2,18 @@
 // 3D map. See README.md; exit codes in core/error.hpp.
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <csignal>
 #include <chrono>
 #include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
 
+#include "minemap/core/atomic_file.hpp"
 #include "minemap/core/error.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/search/pairing.hpp"
@@ -22,6 +25,31 @@ namespace {
 
 namespace fs = std::filesystem;
 using minemap::ExitCode;
+
+/// Set by SIGINT/SIGTERM; the mapper stops at the next scan boundary.
+volatile std::sig_atomic_t g_interrupted = 0;
+extern "C" void on_interrupt(int) { g_interrupted = 1; }
+
+struct Interrupted {};
+
+/// Blocks SIGINT and SIGTERM while alive: outputs are written completely or not at all, and a
+/// signal that arrived meanwhile is delivered (and honoured) once the writing is done.
+class SignalsBlocked {
+ public:
+  SignalsBlocked() {
+    sigset_t set;
+    sigemptyset(&set);
+    sigaddset(&set, SIGINT);
+    sigaddset(&set, SIGTERM);
+    ::sigprocmask(SIG_BLOCK, &set, &previous_);
+  }
+  ~SignalsBlocked() { ::sigprocmask(SIG_SETMASK, &previous_, nullptr); }
+  SignalsBlocked(const SignalsBlocked&) = delete;
+  SignalsBlocked& operator=(const SignalsBlocked&) = delete;
+
+ private:
+  sigset_t previous_;
+};
 
 int exit_code(ExitCode code) { return static_cast<int>(code); }
 
@@ -148,7 +176,11 @@ int run_map(const MapOptions& options) {
   }
 
   ProgressBar bar(!options.quiet);
-  const MappingResult result = map_survey(survey.scans, settings, std::ref(bar));
+  const MappingResult result = map_survey(survey.scans, settings, [&](std::size_t done, std::size_t total,
+                                                                       const std::string& phase) {
+    if (g_interrupted) throw Interrupted{};  // nothing has been written yet: stop here
+    bar(done, total, phase);
+  });
   if (!options.quiet) {
     std::printf("backend: %s\n", result.backend_note.c_str());
     for (const auto& note : result.notes) std::printf("note: %s\n", note.c_str());
@@ -159,7 +191,11 @@ int run_map(const MapOptions& options) {
   output.up_axis = (survey.format == "uos" || options.right_handed_to_3dtk) ? 1 : 2;
   output.title = "minemap " + std::string(to_string(settings.mode)) + ": " + options.survey.filename().string();
   output.load_s = load_s;
-  write_map_outputs(options.out, result, survey.truth_cm, settings, output);
+  {
+    const SignalsBlocked no_interrupts_while_writing;
+    write_map_outputs(options.out, result, survey.truth_cm, settings, output);
+  }
+  if (g_interrupted) throw Interrupted{};
 
   if (!options.quiet) {
     std::printf("matched %zu scans: %d ICP iterations pairwise, %d in %d relaxation matches; %.2f s filter, "
@@ -242,6 +278,11 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : exit_code(ExitCode::kUsage);
   }
+  // `map` stops at a scan boundary on Ctrl-C (SIGINT) or SIGTERM; other commands die as usual.
+  if (*map_cmd) {
+    std::signal(SIGINT, on_interrupt);
+    std::signal(SIGTERM, on_interrupt);
+  }
   // The runtime reads the choice from the environment when it first starts, so the flag sets it.
   if (!opencl_device.empty()) ::setenv("MINEMAP_OPENCL_DEVICE", opencl_device.c_str(), 1);
   try {
@@ -251,6 +292,10 @@ int main(int argc, char** argv) {
       if (*simulate) return run_simulate(sim);
       return run_map(map);
     });
+  } catch (const Interrupted&) {
+    if (*map_cmd) minemap::remove_stale_temp_files(map.out);
+    std::cerr << "minemap: interrupted; outputs already written are complete, nothing was half-written\n";
+    return exit_code(ExitCode::kInterrupted);
   } catch (const minemap::InputError& e) {
     std::cerr << "minemap: " << e.what() << "\n";
     return exit_code(ExitCode::kInputError);
