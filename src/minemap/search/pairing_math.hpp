@@ -5,6 +5,9 @@
 #include <Eigen/Core>
 #include <bit>
 #include <cstdint>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 
 #include "minemap/search/kdtree.hpp"
 
@@ -45,6 +48,42 @@ inline float squared_distance_to_bounds(const KdTree& tree, const Eigen::Vector3
   return (d.x() * d.x() + d.y() * d.y()) + d.z() * d.z();
 }
 
+/// Scans tree points [begin, end) for one closer than `best` (strict '<', first wins), updating
+/// `best` and `best_point` exactly as a sequential scan would. With SSE2, four points are tested
+/// at once and a group with no closer point costs one mask test; the same float operations in the
+/// same order keep the distances bit-identical to the scalar path and to the OpenCL kernel.
+inline void scan_bucket(const KdPoint* points, std::int32_t begin, std::int32_t end, const Eigen::Vector3f& q,
+                        float& best, std::int32_t& best_point) {
+  std::int32_t i = begin;
+#if defined(__SSE2__)
+  const __m128 qx = _mm_set1_ps(q.x()), qy = _mm_set1_ps(q.y()), qz = _mm_set1_ps(q.z());
+  for (; i + 4 <= end; i += 4) {
+    __m128 r0 = _mm_loadu_ps(&points[i].x);
+    __m128 r1 = _mm_loadu_ps(&points[i + 1].x);
+    __m128 r2 = _mm_loadu_ps(&points[i + 2].x);
+    __m128 r3 = _mm_loadu_ps(&points[i + 3].x);
+    _MM_TRANSPOSE4_PS(r0, r1, r2, r3);  // r0 = x of the four points, r1 = y, r2 = z
+    const __m128 dx = _mm_sub_ps(r0, qx), dy = _mm_sub_ps(r1, qy), dz = _mm_sub_ps(r2, qz);
+    const __m128 d = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
+    if (_mm_movemask_ps(_mm_cmplt_ps(d, _mm_set1_ps(best))) == 0) continue;
+    alignas(16) float lanes[4];
+    _mm_store_ps(lanes, d);
+    for (int k = 0; k < 4; ++k) {
+      if (lanes[k] < best) {
+        best = lanes[k];
+        best_point = i + k;
+      }
+    }
+  }
+#endif
+  for (; i < end; ++i) {
+    const float d = squared_distance(points[i], q);
+    const bool closer = d < best;
+    best = closer ? d : best;
+    best_point = closer ? i : best_point;
+  }
+}
+
 /// Exact nearest neighbour with backtracking; only points closer than sqrt(best) are accepted,
 /// so `best` doubles as the maximum pair distance bound (radius-bounded descent). A subtree is
 /// visited only if a lower bound of its distance beats `best`: the bound adds up, per axis, the
@@ -82,13 +121,7 @@ inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& b
       node = go_left ? n.a : n.b;
     }
     const KdNode& leaf = nodes[node];
-    // Branch-free update (selects, not jumps): whether a bucket point is closer is unpredictable.
-    for (std::int32_t i = leaf.a, end = leaf.a + leaf.b; i < end; ++i) {
-      const float d = squared_distance(points[i], q);
-      const bool closer = d < best;
-      best = closer ? d : best;
-      best_point = closer ? i : best_point;
-    }
+    scan_bucket(points, leaf.a, leaf.a + leaf.b, q, best, best_point);
     do {
       if (top == 0) return;
       --top;
