@@ -13,6 +13,10 @@
 
 #include <nanoflann.hpp>
 #include <open3d/Open3D.h>
+#ifdef MINEMAP_HAVE_PCL
+#include <pcl/point_types.h>
+#include <pcl/registration/icp.h>
+#endif
 
 #include "bench_common.hpp"
 #include "minemap/registration/horn.hpp"
@@ -160,6 +164,32 @@ void BM_Peers_open3d(benchmark::State& state) {
   state.counters["rmse_cm"] = result.inlier_rmse_;
 }
 BENCHMARK(BM_Peers_open3d)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
+
+#ifdef MINEMAP_HAVE_PCL
+void BM_Peers_pcl(benchmark::State& state) {
+  const auto& pair = fast_gicp_pair();
+  pcl::PointCloud<pcl::PointXYZ>::Ptr target(new pcl::PointCloud<pcl::PointXYZ>);
+  pcl::PointCloud<pcl::PointXYZ>::Ptr source(new pcl::PointCloud<pcl::PointXYZ>);
+  for (const auto& p : pair.target.points_cm) target->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  for (const auto& p : pair.source.points_cm) source->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  Eigen::Matrix4f final_transform = Eigen::Matrix4f::Identity();
+  for (auto _ : state) {
+    pcl::IterativeClosestPoint<pcl::PointXYZ, pcl::PointXYZ> icp;
+    icp.setInputSource(source);
+    icp.setInputTarget(target);
+    icp.setMaxCorrespondenceDistance(kMaxPairDistCm);
+    icp.setMaximumIterations(500);
+    icp.setTransformationEpsilon(1e-14);
+    icp.setEuclideanFitnessEpsilon(1e-14);
+    pcl::PointCloud<pcl::PointXYZ> aligned;
+    icp.align(aligned, reference_start().cast<float>());
+    final_transform = icp.getFinalTransformation();
+  }
+  // PCL does not report its iteration count.
+  record(state, orthonormalised(final_transform.cast<double>()), -1);
+}
+BENCHMARK(BM_Peers_pcl)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
+#endif
 
 }  // namespace
 }  // namespace minemap::bench

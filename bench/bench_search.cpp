@@ -8,6 +8,10 @@
 #include <tbb/parallel_for.h>
 
 #include <nanoflann.hpp>
+#ifdef MINEMAP_HAVE_PCL
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_types.h>
+#endif
 
 #include "bench_common.hpp"
 #include "minemap/registration/icp.hpp"
@@ -71,12 +75,31 @@ class BoundedNearest {
 
 constexpr float kMaxPairDistCm = 25.0f;
 
-void BM_NearestNeighbour_nanoflann_tbb(benchmark::State& state) {
-  const auto& pair = fast_gicp_pair();
-  CloudAdaptor adaptor{&pair.target.points_cm};
+/// Model points and query points in the model's frame: "lidar" = fast_gicp_pair (source at
+/// identity), "mine" = two simulated paper-size scans, the data scan placed by its true pose.
+struct QueryInput {
+  std::vector<Eigen::Vector3f> model, queries;
+};
+const QueryInput& query_input(const std::string& data) {
+  static const QueryInput lidar{fast_gicp_pair().target.points_cm, fast_gicp_pair().source.points_cm};
+  static const QueryInput mine = [] {
+    const auto& pair = simulated_pair();
+    QueryInput in{pair.model.points_cm, {}};
+    const Pose model_from_data = rigid_inverse(pair.true_world_from_model) * pair.true_world_from_data;
+    for (const auto& p : pair.data.points_cm) {
+      in.queries.push_back((model_from_data.block<3, 3>(0, 0) * p.cast<double>() + model_from_data.block<3, 1>(0, 3)).cast<float>());
+    }
+    return in;
+  }();
+  return data == "mine" ? mine : lidar;
+}
+
+void BM_NearestNeighbour_nanoflann_tbb(benchmark::State& state, std::string data) {
+  const QueryInput& in = query_input(data);
+  CloudAdaptor adaptor{&in.model};
   NanoflannTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   tree.buildIndex();
-  const auto& queries = pair.source.points_cm;
+  const auto& queries = in.queries;
   std::vector<float> best(queries.size());
   for (auto _ : state) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 1024), [&](const auto& range) {
@@ -90,29 +113,64 @@ void BM_NearestNeighbour_nanoflann_tbb(benchmark::State& state) {
   }
   state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * queries.size()));
 }
-BENCHMARK(BM_NearestNeighbour_nanoflann_tbb)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_NearestNeighbour_nanoflann_tbb, lidar, "lidar")->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_NearestNeighbour_nanoflann_tbb, mine, "mine")->Unit(benchmark::kMillisecond)->UseRealTime();
 
-void BM_NearestNeighbour_minemap(benchmark::State& state, Backend backend, SearchMethod method) {
-  const auto& pair = fast_gicp_pair();
+#ifdef MINEMAP_HAVE_PCL
+/// PCL's KdTreeFLANN, the same bound (radiusSearch with at most one neighbour), TBB over queries.
+void BM_NearestNeighbour_pcl_kdtreeflann_tbb(benchmark::State& state, std::string data) {
+  const QueryInput& in = query_input(data);
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  for (const auto& p : in.model) cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
+  tree.setInputCloud(cloud);
+  std::vector<float> best(in.queries.size());
+  for (auto _ : state) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, in.queries.size(), 1024), [&](const auto& range) {
+      std::vector<int> index;
+      std::vector<float> distance;
+      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+        const auto& q = in.queries[i];
+        best[i] = tree.radiusSearch(pcl::PointXYZ(q.x(), q.y(), q.z()), kMaxPairDistCm, index, distance, 1) > 0
+                      ? distance[0]
+                      : -1.0f;
+      }
+    });
+    benchmark::DoNotOptimize(best.data());
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * in.queries.size()));
+}
+BENCHMARK_CAPTURE(BM_NearestNeighbour_pcl_kdtreeflann_tbb, lidar, "lidar")->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_NearestNeighbour_pcl_kdtreeflann_tbb, mine, "mine")->Unit(benchmark::kMillisecond)->UseRealTime();
+#endif
+
+void BM_NearestNeighbour_minemap(benchmark::State& state, std::string input, Backend backend, SearchMethod method) {
+  const QueryInput& in = query_input(input);
   auto pairing = backend_or_skip(state, backend);
   if (!pairing) return;
-  auto model = pairing->prepare(pair.target.points_cm, {});
-  auto data = pairing->prepare(pair.source.points_cm, {});
+  auto model = pairing->prepare(in.model, {});
+  auto data = pairing->prepare(in.queries, {});
   const ModelPlacement placement{model.get(), Pose::Identity()};
   pairing->pair_and_sum(*data, {&placement, 1}, method, {kMaxPairDistCm});  // warm-up
   for (auto _ : state) {
     auto sums = pairing->pair_and_sum(*data, {&placement, 1}, method, {kMaxPairDistCm});
     benchmark::DoNotOptimize(sums.count);
   }
-  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * pair.source.points_cm.size()));
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * in.queries.size()));
 }
-BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, cpu_exact, Backend::kCpu, SearchMethod::kExact)
+BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, lidar/cpu_exact, "lidar", Backend::kCpu, SearchMethod::kExact)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, cpu_approximate, Backend::kCpu, SearchMethod::kApproximate)
+BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, lidar/cpu_approximate, "lidar", Backend::kCpu, SearchMethod::kApproximate)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, opencl_exact, Backend::kOpenCl, SearchMethod::kExact)
+BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, lidar/opencl_exact, "lidar", Backend::kOpenCl, SearchMethod::kExact)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, opencl_approximate, Backend::kOpenCl, SearchMethod::kApproximate)
+BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, lidar/opencl_approximate, "lidar", Backend::kOpenCl, SearchMethod::kApproximate)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, mine/cpu_exact, "mine", Backend::kCpu, SearchMethod::kExact)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, mine/cpu_approximate, "mine", Backend::kCpu, SearchMethod::kApproximate)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, mine/opencl_exact, "mine", Backend::kOpenCl, SearchMethod::kExact)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // ---- Fig. 5: registration time of two scans against bucket size ----
