@@ -18,7 +18,7 @@ while [ $# -gt 0 ]; do
 done
 if [ "$build" = 1 ]; then
   scripts/install-deps.sh bench
-  cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_BENCH=ON >/dev/null
+  cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_BENCH=ON -DMINEMAP_BENCH_PCL=ON >/dev/null
   cmake --build build -j"$(nproc)" --target bench_search bench_table1
   cmake --build build -j"$(nproc)" --target bench_peers 2>/dev/null || echo "bench_peers not built (no Open3D)"
 fi

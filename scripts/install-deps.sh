@@ -9,7 +9,7 @@ packages=(build-essential cmake pkg-config libeigen3-dev libtbb-dev ocl-icd-open
 case "$level" in
   build) ;;
   test) packages+=(clang libclang-rt-14-dev locales) ;;
-  bench) packages+=(clang libclang-rt-14-dev libnanoflann-dev python3 python3-matplotlib libopen3d-dev libpcl-dev) ;;
+  bench) packages+=(clang libclang-rt-14-dev libnanoflann-dev python3 python3-matplotlib libopen3d-dev libpcl-dev libopenmpi-dev) ;;
   *) echo "usage: $0 [build|test|bench]" >&2; exit 2 ;;
 esac
 missing=()
