@@ -19,6 +19,7 @@
 #endif
 
 #include "bench_common.hpp"
+#include "nanoflann_cloud.hpp"
 #include "minemap/registration/horn.hpp"
 #include "minemap/registration/icp.hpp"
 
@@ -80,22 +81,13 @@ void BM_Peers_minemap_cpu(benchmark::State& state) {
 }
 BENCHMARK(BM_Peers_minemap_cpu)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 
-struct CloudAdaptor {
-  const std::vector<Eigen::Vector3f>* points;
-  std::size_t kdtree_get_point_count() const { return points->size(); }
-  float kdtree_get_pt(std::size_t i, std::size_t d) const { return (*points)[i][static_cast<int>(d)]; }
-  template <class Box>
-  bool kdtree_get_bbox(Box&) const { return false; }
-};
-using NanoflannTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>, CloudAdaptor, 3>;
-
 void BM_Peers_nanoflann_tbb(benchmark::State& state) {
   const auto& pair = fast_gicp_pair();
   const IcpSettings settings = tight_settings();
   Pose pose;
   int iterations = 0;
   for (auto _ : state) {
-    CloudAdaptor adaptor{&pair.target.points_cm};
+    NanoflannCloud adaptor{&pair.target.points_cm};
     NanoflannTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(10));
     tree.buildIndex();
     pose = reference_start();

@@ -14,6 +14,7 @@
 #endif
 
 #include "bench_common.hpp"
+#include "nanoflann_cloud.hpp"
 #include "minemap/registration/icp.hpp"
 #include "minemap/search/pairing.hpp"
 
@@ -41,15 +42,6 @@ BENCHMARK_CAPTURE(BM_SliceFilter, cpu, Backend::kCpu)->Unit(benchmark::kMillisec
 BENCHMARK_CAPTURE(BM_SliceFilter, opencl, Backend::kOpenCl)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // ---- nearest neighbour: minemap backends against nanoflann + TBB on the same points and bound ----
-
-struct CloudAdaptor {
-  const std::vector<Eigen::Vector3f>* points;
-  std::size_t kdtree_get_point_count() const { return points->size(); }
-  float kdtree_get_pt(std::size_t i, std::size_t d) const { return (*points)[i][static_cast<int>(d)]; }
-  template <class Box>
-  bool kdtree_get_bbox(Box&) const { return false; }
-};
-using NanoflannTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>, CloudAdaptor, 3>;
 
 /// nanoflann result set for the closest point within a squared radius (the same bound as minemap).
 class BoundedNearest {
@@ -96,7 +88,7 @@ const QueryInput& query_input(const std::string& data) {
 
 void BM_NearestNeighbour_nanoflann_tbb(benchmark::State& state, std::string data) {
   const QueryInput& in = query_input(data);
-  CloudAdaptor adaptor{&in.model};
+  NanoflannCloud adaptor{&in.model};
   NanoflannTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   tree.buildIndex();
   const auto& queries = in.queries;

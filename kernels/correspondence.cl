@@ -102,6 +102,19 @@ inline int mm_search_model(float3 q, __global const int8* nodes, __global const 
   }
 }
 
+// The bound a query starts from: the closest pair found in earlier models of the union, or the
+// maximum pair distance; the first model's launch also clears the query's result.
+inline float mm_start_bound(const int i, const float max_squared_distance, const int first_model,
+                            __global float4* best_pair, __global int2* best_ref) {
+  if (first_model) {
+    best_pair[i] = (float4)(0.0f, 0.0f, 0.0f, -1.0f);
+    best_ref[i] = (int2)(-1, -1);
+    return max_squared_distance;
+  }
+  const float previous = best_pair[i].w;
+  return previous >= 0.0f ? previous : max_squared_distance;
+}
+
 // One work-item per data point. Keeps, across launches for several models (the union of a scan's
 // neighbours), the closest pair so far: best_pair.xyz = model point in the DATA frame,
 // best_pair.w = squared distance or -1; best_ref = (model id, original point index or -1).
@@ -114,14 +127,7 @@ __kernel void nearest_in_tree(__global const float4* data, const int data_count,
                               __global float4* best_pair, __global int2* best_ref) {
   const int i = get_global_id(0);
   if (i >= data_count) return;
-  float best = max_squared_distance;
-  if (!first_model) {
-    const float previous = best_pair[i].w;
-    if (previous >= 0.0f) best = previous;
-  } else {
-    best_pair[i] = (float4)(0.0f, 0.0f, 0.0f, -1.0f);
-    best_ref[i] = (int2)(-1, -1);
-  }
+  float best = mm_start_bound(i, max_squared_distance, first_model, best_pair, best_ref);
   const float3 q = mm_apply_rigid(to_model0, to_model1, to_model2, data[i].xyz);
   if (!(mm_squared_distance_to_box(q, box_lo, box_hi) < best)) return;
   int hit_index = -1;
@@ -151,13 +157,7 @@ __kernel void nearest_brute_force(__global const float4* data, const int data_co
   float best = max_squared_distance;
   float3 q = (float3)(0.0f);
   if (active) {
-    if (!first_model) {
-      const float previous = best_pair[i].w;
-      if (previous >= 0.0f) best = previous;
-    } else {
-      best_pair[i] = (float4)(0.0f, 0.0f, 0.0f, -1.0f);
-      best_ref[i] = (int2)(-1, -1);
-    }
+    best = mm_start_bound(i, max_squared_distance, first_model, best_pair, best_ref);
     q = mm_apply_rigid(to_model0, to_model1, to_model2, data[i].xyz);
   }
   int hit_index = -1;
