@@ -165,6 +165,23 @@ BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, mine/cpu_approximate, "mine", Bac
 BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, mine/opencl_exact, "mine", Backend::kOpenCl, SearchMethod::kExact)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
 
+/// Queries alone (no ICP sums): minemap's closest points written per query, as the nanoflann and
+/// PCL loops write theirs.
+void BM_NearestNeighbour_minemap_queries_only(benchmark::State& state, std::string input) {
+  const QueryInput& in = query_input(input);
+  auto pairing = make_cpu_pairing_backend();
+  auto model = pairing->prepare(in.model, {});
+  auto data = pairing->prepare(in.queries, {});
+  const ModelPlacement placement{model.get(), Pose::Identity()};
+  for (auto _ : state) {
+    auto pairs = pairing->nearest(*data, {&placement, 1}, SearchMethod::kExact, {kMaxPairDistCm});
+    benchmark::DoNotOptimize(pairs.data());
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * in.queries.size()));
+}
+BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap_queries_only, lidar, "lidar")->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap_queries_only, mine, "mine")->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // ---- Fig. 5: registration time of two scans against bucket size ----
 
 void BM_RegistrationBucketSize(benchmark::State& state, SearchMethod method) {
