@@ -657,15 +657,10 @@ TEST_F(IcpRoomTest, DeterministicRunToRunAndAcrossThreadCounts) {
 }
 
 /// Forwards to a backend and records every pairing call: which search, and the RMS it found.
-class RecordingBackend final : public PairingBackend {
+/// Forwards every call to another backend; test decorators override what they observe or break.
+class ForwardingBackend : public PairingBackend {
  public:
-  struct Call {
-    SearchMethod method;
-    double rms_cm;
-    double pairs;
-    float max_pair_dist_cm;
-  };
-  explicit RecordingBackend(PairingBackend& inner) : inner_(inner) {}
+  explicit ForwardingBackend(PairingBackend& inner) : inner_(inner) {}
   std::string name() const override { return inner_.name(); }
   std::string device_description() const override { return inner_.device_description(); }
   std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points,
@@ -674,18 +669,33 @@ class RecordingBackend final : public PairingBackend {
   }
   PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
                         const PairingSettings& settings) override {
-    PairSums sums = inner_.pair_and_sum(data, models, method, settings);
-    calls.push_back({method, sums.rms_cm(), sums.count, settings.max_pair_dist_cm});
-    return sums;
+    return inner_.pair_and_sum(data, models, method, settings);
   }
   std::vector<NearestPair> nearest(const PreparedCloud& data, std::span<const ModelPlacement> models,
                                    SearchMethod method, const PairingSettings& settings) override {
     return inner_.nearest(data, models, method, settings);
   }
-  std::vector<Call> calls;
 
  private:
   PairingBackend& inner_;
+};
+
+class RecordingBackend final : public ForwardingBackend {
+ public:
+  struct Call {
+    SearchMethod method;
+    double rms_cm;
+    double pairs;
+    float max_pair_dist_cm;
+  };
+  using ForwardingBackend::ForwardingBackend;
+  PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
+                        const PairingSettings& settings) override {
+    PairSums sums = ForwardingBackend::pair_and_sum(data, models, method, settings);
+    calls.push_back({method, sums.rms_cm(), sums.count, settings.max_pair_dist_cm});
+    return sums;
+  }
+  std::vector<Call> calls;
 };
 
 TEST_F(IcpRoomTest, ScheduleIsApproximateWhileTheErrorFallsThenExact) {
@@ -751,19 +761,16 @@ TEST_F(IcpRoomTest, ApproximatePhaseThatSettlesIsStillFinishedWithExactSearch) {
 }
 
 /// Forwards to a backend, but from pairing call `from_call` on returns broken sums.
-class FaultyBackend final : public PairingBackend {
+class FaultyBackend final : public ForwardingBackend {
  public:
   enum class Fault { kNaN, kNoPairs };
-  FaultyBackend(PairingBackend& inner, int from_call, Fault fault) : inner_(inner), from_(from_call), fault_(fault) {}
+  FaultyBackend(PairingBackend& inner, int from_call, Fault fault)
+      : ForwardingBackend(inner), from_(from_call), fault_(fault) {}
   std::string name() const override { return "faulty"; }
   std::string device_description() const override { return "faulty"; }
-  std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points,
-                                               const KdTreeSettings& settings) override {
-    return inner_.prepare(std::move(points), settings);
-  }
   PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
                         const PairingSettings& settings) override {
-    PairSums sums = inner_.pair_and_sum(data, models, method, settings);
+    PairSums sums = ForwardingBackend::pair_and_sum(data, models, method, settings);
     if (calls_++ >= from_) {
       if (fault_ == Fault::kNaN) {
         sums.sum_data_model(0, 1) = std::numeric_limits<double>::quiet_NaN();
@@ -774,13 +781,8 @@ class FaultyBackend final : public PairingBackend {
     }
     return sums;
   }
-  std::vector<NearestPair> nearest(const PreparedCloud& data, std::span<const ModelPlacement> models,
-                                   SearchMethod method, const PairingSettings& settings) override {
-    return inner_.nearest(data, models, method, settings);
-  }
 
  private:
-  PairingBackend& inner_;
   int calls_ = 0;
   int from_;
   Fault fault_;
