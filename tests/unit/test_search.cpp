@@ -8,6 +8,7 @@
 
 #include "minemap/search/kdtree.hpp"
 #include "minemap/search/pairing.hpp"
+#include "minemap/search/pairing_math.hpp"
 #include "test_support.hpp"
 
 namespace minemap {
@@ -235,6 +236,37 @@ TEST(KdTree, BucketsHoldAtMostBucketSizePointsAndCutInHalves) {
   std::vector<Eigen::Vector3f> same(1000, Eigen::Vector3f(1, 2, 3));
   KdTree dup(same, {10});
   EXPECT_EQ(dup.nodes().size(), 1u);
+}
+
+// The CPU backend starts each exact search from the previous query's closest point as a bound.
+// That must never change the answer: the same point (ties included) as the unhinted search, which
+// the OpenCL kernel runs, for any hint at all.
+TEST(KdTree, HintedExactSearchReturnsTheUnhintedPoint) {
+  auto cloud = random_cloud(5000, 0.f, 200.f, 21);
+  // Duplicates and points on a lattice make exact ties in float distance common.
+  for (int i = 0; i < 500; ++i) cloud.push_back(cloud[static_cast<std::size_t>(i)]);
+  for (int i = 0; i < 500; ++i) cloud.emplace_back(static_cast<float>(i % 10) * 4.f, static_cast<float>(i / 10 % 10) * 4.f, 0.f);
+  const auto queries = random_cloud(3000, -10.f, 210.f, 22);
+  KdTree tree(cloud, {10});
+  int ties_or_hits = 0;
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    Eigen::Vector3f q = queries[i];
+    if (i % 3 == 0) q = Eigen::Vector3f(static_cast<float>(i % 40), static_cast<float>(i % 37), 0.f);  // on the lattice
+    float plain_best = 25.f * 25.f;
+    std::int32_t plain = -1;
+    detail::exact_nearest(tree, q, plain_best, plain);
+    for (std::int32_t hint : {0, static_cast<std::int32_t>(i % tree.size()), plain >= 0 ? plain : 1}) {
+      float best = 25.f * 25.f;
+      std::int32_t hit = -1;
+      detail::exact_nearest(tree, q, best, hit, hint);
+      ASSERT_EQ(hit, plain) << "query " << i << " hint " << hint;
+      if (hit >= 0) {
+        EXPECT_EQ(std::bit_cast<std::uint32_t>(best), std::bit_cast<std::uint32_t>(plain_best));
+        ++ties_or_hits;
+      }
+    }
+  }
+  EXPECT_GT(ties_or_hits, 1000);
 }
 
 }  // namespace

@@ -38,9 +38,12 @@ std::vector<PlacedModel> place_models(std::span<const ModelPlacement> models) {
   return placed;
 }
 
-/// The closest point of data point `p` over all models.
+/// The closest point of data point `p` over all models. `hints` holds, per model, the tree point
+/// found for the previous query of this block (or -1): queries run along the scan's slices, so that
+/// point is usually a few cm away and its distance, rounded one ulp up, is a far tighter starting
+/// bound than the pair distance. See detail::exact_nearest for why the result cannot change.
 NearestPair find_nearest(const Eigen::Vector3f& p, const std::vector<PlacedModel>& models, SearchMethod method,
-                         float max_squared_distance) {
+                         float max_squared_distance, std::int32_t* hints) {
   NearestPair result;
   float best = max_squared_distance;
   for (std::size_t k = 0; k < models.size(); ++k) {
@@ -60,7 +63,8 @@ NearestPair find_nearest(const Eigen::Vector3f& p, const std::vector<PlacedModel
     }
     std::int32_t hit = -1;
     if (method == SearchMethod::kExact) {
-      detail::exact_nearest(*model.tree, q, best, hit);
+      detail::exact_nearest(*model.tree, q, best, hit, hints[k]);
+      if (hit >= 0) hints[k] = hit;
     } else {
       detail::brute_force_nearest(*model.tree, q, best, hit);
     }
@@ -94,9 +98,10 @@ class CpuPairingBackend final : public PairingBackend {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const tbb::blocked_range<std::size_t>& range) {
       for (std::size_t b = range.begin(); b != range.end(); ++b) {
         PairSums sums;
+        std::vector<std::int32_t> hints(placed.size(), -1);
         const std::size_t end = std::min(points.size(), (b + 1) * kQueriesPerBlock);
         for (std::size_t i = b * kQueriesPerBlock; i < end; ++i) {
-          const NearestPair pair = find_nearest(points[i], placed, method, max_squared);
+          const NearestPair pair = find_nearest(points[i], placed, method, max_squared, hints.data());
           if (pair.squared_distance_cm2 < 0.0f) continue;
           const Eigen::Vector3d p = points[i].cast<double>() - reference;
           const Eigen::Vector3d m = pair.position_cm.cast<double>() - reference;
@@ -123,8 +128,9 @@ class CpuPairingBackend final : public PairingBackend {
     std::vector<NearestPair> result(points.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), kQueriesPerBlock),
                       [&](const tbb::blocked_range<std::size_t>& range) {
+                        std::vector<std::int32_t> hints(placed.size(), -1);
                         for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                          result[i] = find_nearest(points[i], placed, method, max_squared);
+                          result[i] = find_nearest(points[i], placed, method, max_squared, hints.data());
                         }
                       });
     return result;

@@ -4,6 +4,8 @@
 // step-for-step alike (same visiting order, same strict '<' tie rule) so they find the same pairs.
 #include <Eigen/Core>
 #include <bit>
+#include <cmath>
+#include <limits>
 #include <cstdint>
 #if defined(__SSE2__)
 #include <xmmintrin.h>
@@ -89,7 +91,19 @@ inline void scan_bucket(const KdPoint* points, std::int32_t begin, std::int32_t 
 /// visited only if a lower bound of its distance beats `best`: the bound adds up, per axis, the
 /// squared gap between the query and the children's actual extents (nanoflann's incremental
 /// distance, with the gap between the two children instead of the bare cut plane).
-inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& best, std::int32_t& best_point) {
+///
+/// `hint` (a tree point index, or -1) only tightens the starting bound to one ulp above the hint's
+/// distance; the hint itself is not taken as a result. The traversal then visits a subset of the
+/// unhinted traversal's nodes in the same order, and every node holding the first closest point is
+/// still visited (its lower bound is at most that distance, which is below the tightened bound), so
+/// the result is bit-for-bit the unhinted one: same point, ties included.
+inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& best, std::int32_t& best_point,
+                          std::int32_t hint = -1) {
+  const KdPoint* points = tree.points().data();
+  if (hint >= 0) {
+    const float hint_bound = std::nextafter(squared_distance(points[hint], q), std::numeric_limits<float>::infinity());
+    if (hint_bound < best) best = hint_bound;
+  }
   struct Pending {
     std::int32_t node;
     float lower_bound;
@@ -98,7 +112,6 @@ inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& b
   Pending stack[kMaxKdDepth];
   int top = 0;
   const KdNode* nodes = tree.nodes().data();
-  const KdPoint* points = tree.points().data();
   std::int32_t node = 0;
   float lower_bound = 0.0f;
   float offset[3] = {0.0f, 0.0f, 0.0f};
@@ -109,15 +122,17 @@ inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& b
       const bool go_left = v < std::bit_cast<float>(n.split_bits);
       const float gap = go_left ? n.right_min - v : v - n.left_max;
       const float far_bound = (lower_bound - offset[n.axis] * offset[n.axis]) + gap * gap;
-      if (far_bound < best) {
-        Pending& pending = stack[top++];
-        pending.node = go_left ? n.b : n.a;
-        pending.lower_bound = far_bound;
-        pending.offset[0] = offset[0];
-        pending.offset[1] = offset[1];
-        pending.offset[2] = offset[2];
-        pending.offset[n.axis] = gap;
-      }
+      // Written always and kept only when the far side may hold a closer point: the descent
+      // direction and the push are data-dependent coin flips, and mispredicted branches, not
+      // memory, were the cost of the descent.
+      Pending& pending = stack[top];
+      pending.node = go_left ? n.b : n.a;
+      pending.lower_bound = far_bound;
+      pending.offset[0] = offset[0];
+      pending.offset[1] = offset[1];
+      pending.offset[2] = offset[2];
+      pending.offset[n.axis] = gap;
+      top += far_bound < best ? 1 : 0;
       node = go_left ? n.a : n.b;
     }
     const KdNode& leaf = nodes[node];
