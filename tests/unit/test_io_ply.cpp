@@ -134,7 +134,8 @@ TEST(Ply, MalformedHeadersAreRefused) {
       {replaced("end_header", "what\nend_header"), 7, "unknown PLY header keyword"},
       {replaced("1 2 3\n", "1  2\n"), 8, "ends before property z"},
       {replaced("1 2 3\n", "1 2 3 4\n"), 8, "has 4 values"},
-      {replaced("1 2 3\n", "1 nan 3\n"), 8, "not a finite number"},
+      {replaced("1 2 3\n", "1 inf 3\n"), 8, "not a finite number"},
+      {replaced("1 2 3\n", "1 nan 3\n"), 3, "all 1 are NaN"},  // NaN vertices are dropped; none left
       {replaced("1 2 3\n", "\n\n\n\n\n\n"), 13, "file ends after 0 of 1 vertex lines"},
       {replaced("1 2 3\n", ""), 3, "cannot fit"},
   };

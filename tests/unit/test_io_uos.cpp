@@ -131,16 +131,32 @@ TEST(UosPoints, ColumnCountMustStayTheSame) {
   expect_input_error([&] { io::read_uos_points(path); }, {at_line(path, 3), "expected 3 values as on line 1"});
 }
 
-TEST(UosPoints, NonFiniteOrOutOfRangeCoordinatesAreRefused) {
+TEST(UosPoints, InfiniteOrOutOfRangeCoordinatesAreRefused) {
   TempDir dir;
   const auto path = dir / "scan000.3d";
-  for (const std::string bad : {"nan", "inf", "-inf", "NaN", "1e999", "1e39"}) {
+  for (const std::string bad : {"inf", "-inf", "1e999", "1e39"}) {
     write_text(path, "1 2 3\n4 " + bad + " 6\n");
     expect_input_error([&] { io::read_uos_points(path); }, {at_line(path, 2)});
   }
   // Even as the very first line, a non-finite point is an error, not a tolerated header.
-  write_text(path, "nan 0 0\n1 2 3\n");
+  write_text(path, "inf 0 0\n1 2 3\n");
   expect_input_error([&] { io::read_uos_points(path); }, {at_line(path, 1), "not finite"});
+}
+
+TEST(UosPoints, NaNPointsAreDroppedAndCounted) {
+  TempDir dir;
+  const auto path = dir / "scan000.3d";
+  // NaN in any of x y z drops the point, also as the very first line (not a tolerated header).
+  write_text(path, "nan 0 0\n1 2 3\n4 NaN 6\n7 8 9\n");
+  io::ReadReport report;
+  io::ReadSettings settings;
+  settings.report = &report;
+  const Scan scan = io::read_uos_points(path, settings);
+  ASSERT_EQ(scan.size(), 2u);
+  EXPECT_EQ(scan.points_cm[1], Eigen::Vector3f(7, 8, 9));
+  EXPECT_EQ(report.nan_points_dropped, 2u);
+  write_text(path, "nan 0 0\n1 nan 3\n");
+  expect_input_error([&] { io::read_uos_points(path); }, {at_line(path, 2), "all 2 are NaN"});
 }
 
 TEST(UosPoints, EmptyMissingAndCommentOnlyFilesAreRefused) {

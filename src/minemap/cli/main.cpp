@@ -1,5 +1,5 @@
 // The `minemap` program: simulate the built-in mine survey, and map a survey into one consistent
-// 3D map. See README.md; exit codes in core/error.hpp.
+// 3D map. See README.md; exit codes in core/error.hpp, the bad-input cases in docs/bad-input.md.
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 #include <signal.h>
@@ -79,6 +79,8 @@ struct MapOptions {
   float min_point_spacing_cm = 10.0f;
   int slice_stride = 3;
   int point_stride = 1;
+  bool sparse_models = false;
+  int model_slice_stride = minemap::MappingSettings{}.model_slice_stride;
   int min_overlap_pairs = 250;
   double moved_translation_cm = minemap::MappingSettings{}.moved_translation_cm;
   double moved_rotation_deg = minemap::MappingSettings{}.moved_rotation_deg;
@@ -87,6 +89,7 @@ struct MapOptions {
   fs::path initial_poses;
   bool right_handed_to_3dtk = false;
   bool quiet = false;
+  bool write_unregistered = false;
 };
 
 int run_simulate(const SimulateOptions& options) {
@@ -152,6 +155,8 @@ int run_map(const MapOptions& options) {
   settings.filter.outlier_threshold_cm = options.outlier_threshold_cm;
   settings.filter.min_point_spacing_cm = options.min_point_spacing_cm;
   settings.filter.slice_stride = options.slice_stride;
+  settings.dense_models = !options.sparse_models;
+  settings.model_slice_stride = options.model_slice_stride;
   settings.unstructured_point_stride = options.point_stride;
   settings.min_overlap_pairs = options.min_overlap_pairs;
   settings.moved_translation_cm = options.moved_translation_cm;
@@ -173,6 +178,11 @@ int run_map(const MapOptions& options) {
   if (!options.quiet) {
     std::printf("read %zu %s scans from %s in %.2f s (unit %s)\n", survey.scans.size(), survey.format.c_str(),
                 options.survey.c_str(), load_s, to_string(survey.unit));
+    for (const auto& warning : survey.warnings) std::fprintf(stderr, "minemap: warning: %s\n", warning.c_str());
+    if (survey.scans.size() == 1) {
+      std::printf("note: a survey of one scan: nothing to register; the map is %s at its initial pose\n",
+                  survey.scans.front().name.c_str());
+    }
   }
 
   ProgressBar bar(!options.quiet);
@@ -184,6 +194,26 @@ int run_map(const MapOptions& options) {
   if (!options.quiet) {
     std::printf("backend: %s\n", result.backend_note.c_str());
     for (const auto& note : result.notes) std::printf("note: %s\n", note.c_str());
+  }
+
+  // A scan that could not be registered (no overlap, too few pairs) makes the map untrustworthy:
+  // by default nothing is written and the output folder stays as it was, as for bad input.
+  // --write-unregistered writes the outputs anyway, the scan at its odometry pose, for inspection.
+  const bool failed = !result.all_registered();
+  if (failed) {
+    for (std::size_t i = 0; i < result.scans.size(); ++i) {
+      const ScanOutcome& s = result.scans[i];
+      if (s.registered) continue;
+      std::fprintf(stderr, "minemap: %s: scan %s not registered: %s\n", survey.scans[i].source_path.c_str(),
+                   s.name.c_str(), s.failure.c_str());
+    }
+    if (!options.write_unregistered) {
+      std::fprintf(stderr,
+                   "minemap: nothing was written to %s; --write-unregistered writes the map with these scans at "
+                   "their odometry poses (report.json marks them)\n",
+                   options.out.c_str());
+      return exit_code(ExitCode::kRegistrationFailed);
+    }
   }
 
   MapOutputSettings output;
@@ -212,13 +242,7 @@ int run_map(const MapOptions& options) {
     std::printf("wrote %s (frames, poses, trajectory.tum, map.ply, report.json, top.png, side.png)\n",
                 options.out.c_str());
   }
-  if (!result.all_registered()) {
-    for (const auto& s : result.scans) {
-      if (!s.registered) std::fprintf(stderr, "minemap: scan %s not registered: %s\n", s.name.c_str(), s.failure.c_str());
-    }
-    return exit_code(ExitCode::kRegistrationFailed);
-  }
-  return 0;
+  return failed ? exit_code(ExitCode::kRegistrationFailed) : 0;
 }
 
 }  // namespace
@@ -259,6 +283,11 @@ int main(int argc, char** argv) {
   map_cmd->add_option("--outlier-threshold-cm", map.outlier_threshold_cm, "Median filter threshold")->capture_default_str();
   map_cmd->add_option("--min-point-spacing-cm", map.min_point_spacing_cm, "Reduction spacing")->capture_default_str();
   map_cmd->add_option("--slice-stride", map.slice_stride, "Keep every n-th slice")->capture_default_str();
+  map_cmd->add_option("--model-slice-stride", map.model_slice_stride,
+                      "Scans matched against keep every n-th slice (denser than the data: less bias)")
+      ->capture_default_str();
+  map_cmd->add_flag("--sparse-models", map.sparse_models,
+                    "Match against clouds reduced like the data, as the paper does (faster, less accurate)");
   map_cmd->add_option("--point-stride", map.point_stride, "Scans without slices: keep every n-th point")->capture_default_str();
   map_cmd->add_option("--min-overlap-pairs", map.min_overlap_pairs, "Overlap threshold (pairs)")->capture_default_str();
   map_cmd->add_option("--moved-translation-cm", map.moved_translation_cm,
@@ -272,6 +301,8 @@ int main(int argc, char** argv) {
   map_cmd->add_option("--initial-poses", map.initial_poses, "Initial poses (TUM, KITTI, 4x4 or graph file)");
   map_cmd->add_flag("--right-handed-to-3dtk", map.right_handed_to_3dtk, "Convert right-handed input to 3DTK's frame");
   map_cmd->add_flag("--quiet", map.quiet, "Print nothing but errors");
+  map_cmd->add_flag("--write-unregistered", map.write_unregistered,
+                    "Write the outputs even when a scan could not be registered (exit code 4 still)");
 
   try {
     app.parse(argc, argv);
@@ -297,8 +328,9 @@ int main(int argc, char** argv) {
     std::cerr << "minemap: interrupted; outputs already written are complete, nothing was half-written\n";
     return exit_code(ExitCode::kInterrupted);
   } catch (const minemap::InputError& e) {
+    // Thrown while reading, before the output folder is touched: it is left as it was.
     std::cerr << "minemap: " << e.what() << "\n";
-    return exit_code(ExitCode::kInputError);
+    return exit_code(minemap::exit_code_for(e.problem()));
   } catch (const minemap::OutputError& e) {
     std::cerr << "minemap: " << e.what() << "\n";
     return exit_code(ExitCode::kOutputError);

@@ -1,7 +1,14 @@
 #pragma once
 // Readers and writers for the formats surveys come in. Every reader throws InputError naming the
 // file and the line (text) or byte offset (binary) on truncated, malformed, non-finite, empty or
-// absurdly sized input; every writer writes atomically (temp file + rename, core/atomic_file.hpp).
+// absurdly sized input, with InputError::problem() saying which (docs/bad-input.md has the table);
+// every writer writes atomically (temp file + rename, core/atomic_file.hpp).
+//
+// Non-finite coordinates, the same rule for every point reader: a point with a NaN x, y or z is a
+// "no return" marker (PCL's convention; 3DTK would read it as a point) and is dropped and counted
+// (ReadReport); a scan whose points are all NaN is an error (kNonFinite). An infinite coordinate,
+// or one beyond +-1e10 cm (10^5 km; binary garbage read as floats lands there), is an error at its
+// line or byte. Pose and trajectory values have no such marker: NaN or inf there is an error.
 //
 // Units: minemap holds lengths in cm. Each reader takes the file's unit (ReadSettings::unit, with a
 // per-format default: cm for 3DTK uos, m for PCD, PLY and KITTI) and converts on load; each writer
@@ -22,6 +29,11 @@ namespace minemap::io {
 
 namespace fs = std::filesystem;
 
+/// What a reader dropped without failing (ReadSettings::report).
+struct ReadReport {
+  std::uint64_t nan_points_dropped = 0;  ///< points with a NaN x, y or z (no-return markers)
+};
+
 /// How to interpret a file's coordinates.
 struct ReadSettings {
   std::optional<LengthUnit> unit;  ///< the file's unit; nullopt = the format's default
@@ -30,8 +42,12 @@ struct ReadSettings {
   bool right_handed_to_3dtk = false;
   /// uos files without "# slice" markers: split into slices of this many points (0 = no slices).
   std::uint32_t points_per_slice = 0;
-  /// Refuse files that claim more points than this (absurd headers must not allocate).
+  /// Refuse files that claim more points than this (absurd headers must not allocate):
+  /// InputProblem::kCountBeyondLimits. A count within it that the file is too short to hold is
+  /// kTruncated; either way it is checked against the file size before anything is allocated.
   std::uint64_t max_points = 50'000'000;
+  /// When set, point readers add what they dropped (NaN points) to it.
+  ReadReport* report = nullptr;
 };
 
 // ---- 3DTK uos: scanNNN.3d, scanNNN.pose, scanNNN.frames --------------------------------------
@@ -124,12 +140,26 @@ struct Survey {
   LengthUnit unit = LengthUnit::kCentimetre;  ///< the unit the files were read in (outputs use it)
   std::vector<Scan> scans;                    ///< ordered by name; pose_cm = initial guess
   std::optional<std::vector<Pose>> truth_cm;  ///< reference T_world_file per scan, where present
+  /// Warnings for the user, one line each: NaN points dropped, gaps in the numbering.
+  std::vector<std::string> warnings;
 };
+
+/// The fewest points a survey's scan may have (Horn's closed form needs three points).
+inline constexpr std::size_t kMinScanPoints = 3;
+/// The units check (read_survey): with the unit left to uos' default (cm), a survey whose every
+/// scan of at least kUnitCheckMinPoints points spans less than this diagonal is refused as
+/// suspicious (metres read as cm); an explicit ReadSettings::unit skips the check.
+inline constexpr double kSuspiciousScanDiagonal_cm = 100.0;
+inline constexpr std::size_t kUnitCheckMinPoints = 100;
 
 /// Detects the format and reads every scan. Layouts:
 ///  - uos: scanNNN.3d (+ scanNNN.pose; missing pose = error), optional truth/scanNNN.pose
 ///  - pcd / ply: *.pcd / *.ply sorted by name; initial poses from `initial_poses` or identity
 ///  - kitti: NNNNNN.bin, or NNNNNN/points.bin (xyz only) with graph.txt as reference poses
+/// Every file is parsed first (the first bad file in name order is reported), then the survey is
+/// checked as a whole: a scan with fewer than kMinScanPoints points (kEmpty), two scans with the
+/// same number or the same points (kInconsistentSurvey), the units check (kSuspiciousUnits). Gaps in
+/// the numbering and dropped NaN points are Survey::warnings.
 Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings = {});
 
 /// Writes a survey in uos layout (scanNNN.3d + .pose), and truth/ when given.

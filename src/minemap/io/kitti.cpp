@@ -31,21 +31,26 @@ Scan read_kitti_bin(const fs::path& path, const ReadSettings& settings, int floa
   std::error_code error;
   const std::uintmax_t size_on_disk = fs::file_size(path, error);
   if (!error && size_on_disk / record_bytes > settings.max_points) {
-    detail::fail_in_file(name, "holds " + std::to_string(size_on_disk / record_bytes) + " points, more than max_points = " +
-                                   std::to_string(settings.max_points));
+    detail::fail_in_file(name,
+                         "holds " + std::to_string(size_on_disk / record_bytes) + " points, more than max_points = " +
+                             std::to_string(settings.max_points),
+                         InputProblem::kCountBeyondLimits);
   }
   const std::string bytes = detail::read_file_bytes(path);
-  if (bytes.empty()) detail::fail_at_byte(name, 0, "no points (empty file)");
+  if (bytes.empty()) detail::fail_at_byte(name, 0, "no points (empty file)", InputProblem::kEmpty);
   const std::uint64_t whole_records = bytes.size() / record_bytes;
   if (bytes.size() % record_bytes != 0) {
     detail::fail_at_byte(name, whole_records * record_bytes,
                          "file size " + std::to_string(bytes.size()) + " is not a multiple of " +
                              std::to_string(record_bytes) + " bytes (" + std::to_string(floats_per_point) +
-                             " float32 per point): the last point is truncated");
+                             " float32 per point): the last point is truncated",
+                         InputProblem::kTruncated);
   }
   if (whole_records > settings.max_points) {
-    detail::fail_in_file(name, "holds " + std::to_string(whole_records) + " points, more than max_points = " +
-                                   std::to_string(settings.max_points));
+    detail::fail_in_file(name,
+                         "holds " + std::to_string(whole_records) + " points, more than max_points = " +
+                             std::to_string(settings.max_points),
+                         InputProblem::kCountBeyondLimits);
   }
   detail::ScanBuilder builder(path, settings, LengthUnit::kMetre);
   builder.reserve(static_cast<std::size_t>(whole_records));
@@ -57,14 +62,19 @@ Scan read_kitti_bin(const fs::path& path, const ReadSettings& settings, int floa
     const double z = detail::load_le<float>(record + 8);
     const double xyz[3] = {x, y, z};
     for (int axis = 0; axis < 3; ++axis) {
-      if (!std::isfinite(xyz[axis])) {
+      if (std::isinf(xyz[axis])) {  // NaN drops the point (ScanBuilder)
         detail::fail_at_byte(name, offset + 4 * static_cast<std::uint64_t>(axis),
-                             "point " + std::to_string(i) + ": " + static_cast<char>('x' + axis) + " is not finite");
+                             "point " + std::to_string(i) + ": " + static_cast<char>('x' + axis) + " is not finite",
+                             InputProblem::kNonFinite);
       }
     }
     const auto added = builder.add(x, y, z);
-    if (added != detail::ScanBuilder::AddResult::kOk) detail::fail_at_byte(name, offset, builder.describe(added));
+    if (added != detail::ScanBuilder::AddResult::kOk) {
+      detail::fail_at_byte(name, offset, "point " + std::to_string(i) + ": " + builder.describe(added),
+                           builder.problem_of(added));
+    }
   }
+  if (builder.size() == 0) detail::fail_at_byte(name, 0, builder.no_points_message(), builder.no_points_problem());
   return builder.finish(/*split_unmarked=*/false);
 }
 

@@ -6,10 +6,10 @@
 //
 // Choices, documented here because PCL leaves them open:
 //  - x, y and z must be F4 or F8 with COUNT 1; every other field (any type, size, count) is skipped.
-//  - NaN points are dropped silently. PCL marks "no return" with NaN x/y/z in organized clouds
-//    (HEIGHT > 1), and a PCD file has no is_dense flag, so any PCD may hold them legitimately
-//    (pcl::removeNaNFromPointCloud drops a point when x, y or z is NaN; so do we). An infinite
-//    coordinate is never a PCL convention: it is an InputError at its line or byte.
+//  - NaN points are dropped and counted (ReadReport). PCL marks "no return" with NaN x/y/z in
+//    organized clouds (HEIGHT > 1), and a PCD file has no is_dense flag, so any PCD may hold them
+//    legitimately (pcl::removeNaNFromPointCloud drops a point when x, y or z is NaN; so do we). An
+//    infinite coordinate is never a PCL convention: it is an InputError at its line or byte.
 //  - VIEWPOINT (tx ty tz qw qx qy qz), PCL's sensor origin and orientation, becomes Scan::pose_cm
 //    (translation in cm): the initial guess T_world_file. Files written by PCL almost always carry
 //    the identity; the writer stores pose_cm there, so a round trip keeps the pose.
@@ -143,7 +143,8 @@ PcdHeader read_header(LineReader& reader, const ReadSettings& settings, double s
     }
   }
   if (!have_data) {
-    reader.fail(reader.line_number() == 0 ? "empty file, not a PCD" : "header has no DATA line (no point data)");
+    if (reader.line_number() == 0) reader.fail("empty file, not a PCD", InputProblem::kEmpty);
+    reader.fail("header has no DATA line (no point data): the file ends in the header", InputProblem::kTruncated);
   }
   header.data_offset = reader.offset();
 
@@ -169,14 +170,18 @@ PcdHeader read_header(LineReader& reader, const ReadSettings& settings, double s
     const bool size_ok = field.type == 'F' ? (field.size == 4 || field.size == 8)
                                            : (field.size == 1 || field.size == 2 || field.size == 4 || field.size == 8);
     if (!size_ok) reader.fail("field " + field.name + ": SIZE " + std::to_string(field.size) + " is invalid for TYPE " + field.type);
-    if (field.count == 0 || field.count > kMaxPointBytes) {
-      reader.fail("field " + field.name + ": COUNT " + std::to_string(field.count) + " is out of range");
+    if (field.count == 0) reader.fail("field " + field.name + ": COUNT 0 is out of range");
+    if (field.count > kMaxPointBytes) {
+      reader.fail("field " + field.name + ": COUNT " + std::to_string(field.count) + " is out of range",
+                  InputProblem::kCountBeyondLimits);
     }
     field.byte_offset = header.point_bytes;
     field.first_value = header.values_per_point;
     header.point_bytes += field.size * field.count;
     header.values_per_point += field.count;
-    if (header.point_bytes > kMaxPointBytes) reader.fail("a point of more than 1 MiB: FIELDS/SIZE/COUNT are not plausible");
+    if (header.point_bytes > kMaxPointBytes) {
+      reader.fail("a point of more than 1 MiB: FIELDS/SIZE/COUNT are not plausible", InputProblem::kCountBeyondLimits);
+    }
     for (int axis = 0; axis < 3; ++axis) {
       if (field.name == std::string(1, static_cast<char>('x' + axis)) && header.xyz_fields[axis] < 0) {
         header.xyz_fields[axis] = static_cast<int>(i);
@@ -194,7 +199,7 @@ PcdHeader read_header(LineReader& reader, const ReadSettings& settings, double s
   // Counts: WIDTH * HEIGHT = POINTS, and never more than max_points (checked before any allocation).
   if (!have_width) reader.fail("header has no WIDTH line");
   if (header.height != 0 && header.width > std::numeric_limits<std::uint64_t>::max() / header.height) {
-    detail::fail_at_line(reader.path(), width_line, "WIDTH x HEIGHT overflows");
+    detail::fail_at_line(reader.path(), width_line, "WIDTH x HEIGHT overflows", InputProblem::kCountBeyondLimits);
   }
   const std::uint64_t width_times_height = header.width * header.height;
   if (!have_points) {
@@ -205,27 +210,29 @@ PcdHeader read_header(LineReader& reader, const ReadSettings& settings, double s
                          "POINTS " + std::to_string(header.points) + " differs from WIDTH x HEIGHT = " +
                              std::to_string(header.width) + " x " + std::to_string(header.height));
   }
-  if (header.points == 0) detail::fail_at_line(reader.path(), points_line, "no points (POINTS 0)");
+  if (header.points == 0) detail::fail_at_line(reader.path(), points_line, "no points (POINTS 0)", InputProblem::kEmpty);
   if (header.points > settings.max_points) {
     detail::fail_at_line(reader.path(), points_line,
                          "claims " + std::to_string(header.points) + " points, more than max_points = " +
-                             std::to_string(settings.max_points));
+                             std::to_string(settings.max_points),
+                         InputProblem::kCountBeyondLimits);
   }
   return header;
 }
 
-/// Adds one point read from the data, or drops it when it is a NaN "no return" point.
-/// `where` is called to throw at the right line or byte.
+/// Adds one point read from the data; the builder drops (and counts) a NaN "no return" point.
+/// `fail(axis, message, problem)` is called to throw at the right line or byte.
 template <class Fail>
 void add_point(detail::ScanBuilder& builder, const std::array<double, 3>& xyz, Fail&& fail) {
-  if (std::isnan(xyz[0]) || std::isnan(xyz[1]) || std::isnan(xyz[2])) return;
-  for (int axis = 0; axis < 3; ++axis) {
-    if (!std::isfinite(xyz[static_cast<std::size_t>(axis)])) {
-      fail(axis, std::string(1, static_cast<char>('x' + axis)) + " is infinite");
+  if (!(std::isnan(xyz[0]) || std::isnan(xyz[1]) || std::isnan(xyz[2]))) {
+    for (int axis = 0; axis < 3; ++axis) {
+      if (!std::isfinite(xyz[static_cast<std::size_t>(axis)])) {
+        fail(axis, std::string(1, static_cast<char>('x' + axis)) + " is infinite", InputProblem::kNonFinite);
+      }
     }
   }
   const auto added = builder.add(xyz[0], xyz[1], xyz[2]);
-  if (added != detail::ScanBuilder::AddResult::kOk) fail(0, builder.describe(added));
+  if (added != detail::ScanBuilder::AddResult::kOk) fail(0, builder.describe(added), builder.problem_of(added));
 }
 
 void read_ascii_data(LineReader& reader, const PcdHeader& header, detail::ScanBuilder& builder, std::size_t file_size) {
@@ -233,7 +240,8 @@ void read_ascii_data(LineReader& reader, const PcdHeader& header, detail::ScanBu
   const std::uint64_t remaining = file_size - header.data_offset;
   if (header.points > (remaining + 1) / (2 * header.values_per_point)) {
     reader.fail("POINTS " + std::to_string(header.points) + " cannot fit in the " + std::to_string(remaining) +
-                " bytes after the header");
+                    " bytes after the header: the file is truncated, or POINTS is wrong",
+                InputProblem::kTruncated);
   }
   builder.reserve(static_cast<std::size_t>(header.points));
   std::vector<std::string_view> tokens(header.values_per_point);
@@ -245,21 +253,29 @@ void read_ascii_data(LineReader& reader, const PcdHeader& header, detail::ScanBu
     ++lines_read;
     const std::size_t count = detail::split_tokens(line, tokens);
     if (count != header.values_per_point) {
-      reader.fail("expected " + std::to_string(header.values_per_point) + " values per point (FIELDS/COUNT), found " +
-                  std::to_string(count));
+      const std::string problem = "expected " + std::to_string(header.values_per_point) +
+                                  " values per point (FIELDS/COUNT), found " + std::to_string(count);
+      if (count < header.values_per_point) reader.fail_short_line(problem);
+      reader.fail(problem);
     }
     std::array<double, 3> xyz{};
     for (int axis = 0; axis < 3; ++axis) {
       const std::string_view token = tokens[header.fields[static_cast<std::size_t>(header.xyz_fields[axis])].first_value];
-      if (detail::parse_double(token, xyz[static_cast<std::size_t>(axis)]) != detail::NumberStatus::kOk) {
-        reader.fail(std::string(1, static_cast<char>('x' + axis)) + " value " + detail::quoted(token) +
-                    " is not a number or out of range");
+      const auto status = detail::parse_double(token, xyz[static_cast<std::size_t>(axis)]);
+      if (status != detail::NumberStatus::kOk) {
+        const std::string problem = std::string(1, static_cast<char>('x' + axis)) + " value " + detail::quoted(token) +
+                                    " is not a number or out of range";
+        if (status == detail::NumberStatus::kOutOfRange) reader.fail(problem, InputProblem::kNonFinite);
+        if (token.data() + token.size() == line.data() + line.size()) reader.fail_short_line(problem);
+        reader.fail(problem);
       }
     }
-    add_point(builder, xyz, [&](int, const std::string& message) { reader.fail(message); });
+    add_point(builder, xyz, [&](int, const std::string& message, InputProblem problem) { reader.fail(message, problem); });
   }
   if (lines_read < header.points) {
-    reader.fail("only " + std::to_string(lines_read) + " of POINTS " + std::to_string(header.points) + " data lines");
+    reader.fail("only " + std::to_string(lines_read) + " of POINTS " + std::to_string(header.points) +
+                    " data lines: the file ends early",
+                InputProblem::kTruncated);
   }
 }
 
@@ -285,9 +301,9 @@ void read_binary_points(const char* data, const PcdHeader& header, detail::ScanB
       const char* value = data + base[axis] + i * stride[axis];
       xyz[axis] = is_double[axis] ? detail::load_le<double>(value) : detail::load_le<float>(value);
     }
-    add_point(builder, xyz, [&](int axis, const std::string& message) {
+    add_point(builder, xyz, [&](int axis, const std::string& message, InputProblem problem) {
       const std::uint64_t offset = base[static_cast<std::size_t>(axis)] + i * stride[static_cast<std::size_t>(axis)];
-      detail::fail_at_byte(path, byte_of(offset), "point " + std::to_string(i) + ": " + message);
+      detail::fail_at_byte(path, byte_of(offset), "point " + std::to_string(i) + ": " + message, problem);
     });
   }
 }
@@ -304,7 +320,7 @@ Scan read_pcd(const fs::path& path, const ReadSettings& settings) {
   const std::uint64_t remaining = bytes.size() - header.data_offset;
   const char* data = bytes.data() + header.data_offset;
   if (header.points > std::numeric_limits<std::uint64_t>::max() / header.point_bytes) {
-    detail::fail_at_byte(name, header.data_offset, "POINTS x point size overflows");
+    detail::fail_at_byte(name, header.data_offset, "POINTS x point size overflows", InputProblem::kCountBeyondLimits);
   }
   const std::uint64_t data_bytes = header.points * header.point_bytes;
   switch (header.encoding) {
@@ -316,7 +332,8 @@ Scan read_pcd(const fs::path& path, const ReadSettings& settings) {
         detail::fail_at_byte(name, header.data_offset + remaining,
                              "binary data truncated: " + std::to_string(header.points) + " points of " +
                                  std::to_string(header.point_bytes) + " bytes need " + std::to_string(data_bytes) +
-                                 " bytes, the file has " + std::to_string(remaining) + " after the header");
+                                 " bytes, the file has " + std::to_string(remaining) + " after the header",
+                             InputProblem::kTruncated);
       }
       read_binary_points(
           data, header, builder, name, [](const PcdField& f) { return f.byte_offset; },
@@ -326,14 +343,16 @@ Scan read_pcd(const fs::path& path, const ReadSettings& settings) {
     }
     case PcdEncoding::kBinaryCompressed: {
       if (remaining < 8) {
-        detail::fail_at_byte(name, header.data_offset, "binary_compressed data truncated: no block sizes");
+        detail::fail_at_byte(name, header.data_offset, "binary_compressed data truncated: no block sizes",
+                             InputProblem::kTruncated);
       }
       const std::uint64_t compressed_bytes = detail::load_le<std::uint32_t>(data);
       const std::uint64_t uncompressed_bytes = detail::load_le<std::uint32_t>(data + 4);
       if (compressed_bytes > remaining - 8) {
         detail::fail_at_byte(name, header.data_offset,
                              "compressed block of " + std::to_string(compressed_bytes) + " bytes is truncated (" +
-                                 std::to_string(remaining - 8) + " bytes left)");
+                                 std::to_string(remaining - 8) + " bytes left)",
+                             InputProblem::kTruncated);
       }
       if (uncompressed_bytes != data_bytes) {
         detail::fail_at_byte(name, header.data_offset + 4,
@@ -363,7 +382,7 @@ Scan read_pcd(const fs::path& path, const ReadSettings& settings) {
     }
   }
   if (builder.size() == 0) {
-    detail::fail_at_byte(name, header.data_offset, "no points (all " + std::to_string(header.points) + " are NaN)");
+    detail::fail_at_byte(name, header.data_offset, builder.no_points_message(), builder.no_points_problem());
   }
   Scan scan = builder.finish(/*split_unmarked=*/false);
   scan.pose_cm = header.viewpoint_cm;

@@ -9,7 +9,9 @@
 //  - ascii: one element instance per line (what every writer produces), so a wrong value count is
 //    reported at its line instead of shifting every later value.
 //  - binary_big_endian is refused with a clear message (no real survey data uses it).
-//  - NaN or infinite vertices are an InputError: PLY has no "no return" convention.
+//  - A vertex with a NaN coordinate is dropped and counted, as in every point reader (formats.hpp;
+//    PLY has no "no return" convention, but exporters write NaN for missing points); an infinite
+//    one is an InputError.
 #include <array>
 #include <cmath>
 #include <limits>
@@ -133,7 +135,8 @@ struct PlyHeader {
 PlyHeader read_header(LineReader& reader, const ReadSettings& settings) {
   PlyHeader header;
   std::string_view line;
-  if (!reader.next(line) || detail::trim(line) != "ply") reader.fail("not a PLY file (the first line is not 'ply')");
+  if (!reader.next(line)) reader.fail("empty file, not a PLY file", InputProblem::kEmpty);
+  if (detail::trim(line) != "ply") reader.fail("not a PLY file (the first line is not 'ply')");
   bool have_format = false;
   bool have_end = false;
   std::vector<std::string_view> tokens;
@@ -186,7 +189,7 @@ PlyHeader read_header(LineReader& reader, const ReadSettings& settings) {
       reader.fail("unknown PLY header keyword " + detail::quoted(keyword));
     }
   }
-  if (!have_end) reader.fail("header has no end_header line");
+  if (!have_end) reader.fail("header has no end_header line: the file ends in the header", InputProblem::kTruncated);
   if (!have_format) reader.fail("header has no format line");
   header.data_offset = reader.offset();
 
@@ -210,11 +213,14 @@ PlyHeader read_header(LineReader& reader, const ReadSettings& settings) {
     }
     if (!found) detail::fail_at_line(reader.path(), vertex.line, "vertex element has no property " + axis_name);
   }
-  if (vertex.count == 0) detail::fail_at_line(reader.path(), vertex.line, "no points (element vertex 0)");
+  if (vertex.count == 0) {
+    detail::fail_at_line(reader.path(), vertex.line, "no points (element vertex 0)", InputProblem::kEmpty);
+  }
   if (vertex.count > settings.max_points) {
     detail::fail_at_line(reader.path(), vertex.line,
                          "claims " + std::to_string(vertex.count) + " vertices, more than max_points = " +
-                             std::to_string(settings.max_points));
+                             std::to_string(settings.max_points),
+                         InputProblem::kCountBeyondLimits);
   }
   return header;
 }
@@ -227,13 +233,18 @@ class BinaryCursor {
 
   std::uint64_t position() const { return position_; }
   std::uint64_t remaining() const { return bytes_.size() - position_; }
-  [[noreturn]] void fail(std::uint64_t offset, const std::string& message) const { detail::fail_at_byte(path_, offset, message); }
+  [[noreturn]] void fail(std::uint64_t offset, const std::string& message,
+                         InputProblem problem = InputProblem::kMalformed) const {
+    detail::fail_at_byte(path_, offset, message, problem);
+  }
 
   /// `count` bytes at the current position, then advances; fails when the file ends first.
   const char* take(std::uint64_t count, std::string_view what) {
     if (count > remaining()) {
-      fail(position_, "file ends inside " + std::string(what) + " (" + std::to_string(count) + " bytes needed, " +
-                          std::to_string(remaining()) + " left)");
+      fail(position_,
+           "file ends inside " + std::string(what) + " (" + std::to_string(count) + " bytes needed, " +
+               std::to_string(remaining()) + " left)",
+           InputProblem::kTruncated);
     }
     const char* at = bytes_.data() + position_;
     position_ += count;
@@ -267,8 +278,10 @@ void skip_binary_element(BinaryCursor& cursor, const PlyElement& element) {
   if (!element.has_lists()) {
     const std::uint64_t size = element.min_binary_size();
     if (element.count > cursor.remaining() / size) {
-      cursor.fail(cursor.position(), "file ends inside element " + element.name + " (" + std::to_string(element.count) +
-                                         " instances of " + std::to_string(size) + " bytes declared)");
+      cursor.fail(cursor.position(),
+                  "file ends inside element " + element.name + " (" + std::to_string(element.count) + " instances of " +
+                      std::to_string(size) + " bytes declared)",
+                  InputProblem::kTruncated);
     }
     cursor.take(element.count * size, element.name);
     return;
@@ -281,8 +294,10 @@ void read_binary_vertices(BinaryCursor& cursor, const PlyHeader& header, detail:
   const PlyElement& vertex = header.elements[header.vertex_element];
   // Checked before reserving: the declared count must fit in what is left of the file.
   if (vertex.count > cursor.remaining() / vertex.min_binary_size()) {
-    cursor.fail(cursor.position(), "file ends inside the vertices: " + std::to_string(vertex.count) + " declared, " +
-                                       std::to_string(cursor.remaining()) + " bytes left");
+    cursor.fail(cursor.position(),
+                "file ends inside the vertices: " + std::to_string(vertex.count) + " declared, " +
+                    std::to_string(cursor.remaining()) + " bytes left",
+                InputProblem::kTruncated);
   }
   builder.reserve(static_cast<std::size_t>(vertex.count));
   for (std::uint64_t i = 0; i < vertex.count; ++i) {
@@ -297,13 +312,17 @@ void read_binary_vertices(BinaryCursor& cursor, const PlyHeader& header, detail:
       }
     });
     for (std::size_t axis = 0; axis < 3; ++axis) {
-      if (!std::isfinite(xyz[axis])) {
-        cursor.fail(offsets[axis], "vertex " + std::to_string(i) + ": " + static_cast<char>('x' + axis) + " is not finite");
+      if (std::isinf(xyz[axis])) {  // NaN drops the vertex (ScanBuilder)
+        cursor.fail(offsets[axis], "vertex " + std::to_string(i) + ": " + static_cast<char>('x' + axis) + " is not finite",
+                    InputProblem::kNonFinite);
       }
     }
     const auto added = builder.add(xyz[0], xyz[1], xyz[2]);
-    if (added != detail::ScanBuilder::AddResult::kOk) cursor.fail(offsets[0], builder.describe(added));
+    if (added != detail::ScanBuilder::AddResult::kOk) {
+      cursor.fail(offsets[0], "vertex " + std::to_string(i) + ": " + builder.describe(added), builder.problem_of(added));
+    }
   }
+  if (builder.size() == 0) cursor.fail(header.data_offset, builder.no_points_message(), builder.no_points_problem());
 }
 
 /// Checks one ascii instance line against `element`'s properties (lists: a count, then that many
@@ -315,8 +334,8 @@ void index_ascii_instance(const LineReader& reader, const PlyElement& element, s
   for (std::size_t p = 0; p < element.properties.size(); ++p) {
     const PlyProperty& property = element.properties[p];
     if (next >= tokens.size()) {
-      reader.fail(element.name + " line ends before property " + property.name + " (" + std::to_string(tokens.size()) +
-                  " values)");
+      reader.fail_short_line(element.name + " line ends before property " + property.name + " (" +
+                             std::to_string(tokens.size()) + " values)");
     }
     token_of_property[p] = next;
     if (!property.is_list) {
@@ -327,7 +346,7 @@ void index_ascii_instance(const LineReader& reader, const PlyElement& element, s
     if (!detail::parse_uint64(tokens[next], count)) {
       reader.fail("list length " + detail::quoted(tokens[next]) + " of " + property.name + " is not a non-negative integer");
     }
-    if (count > tokens.size() - next - 1) reader.fail("list " + property.name + " is longer than its line");
+    if (count > tokens.size() - next - 1) reader.fail_short_line("list " + property.name + " is longer than its line");
     next += 1 + count;
   }
   if (next != tokens.size()) {
@@ -346,7 +365,8 @@ void next_ascii_instance(LineReader& reader, const PlyElement& element, std::uin
     return;
   }
   reader.fail("file ends after " + std::to_string(index) + " of " + std::to_string(element.count) + " " + element.name +
-              " lines");
+                  " lines",
+              InputProblem::kTruncated);
 }
 
 void read_ascii_data(LineReader& reader, const PlyHeader& header, detail::ScanBuilder& builder, std::size_t file_size) {
@@ -366,7 +386,8 @@ void read_ascii_data(LineReader& reader, const PlyHeader& header, detail::ScanBu
   if (vertex.count > (remaining + 1) / (2 * vertex.properties.size())) {
     detail::fail_at_line(reader.path(), vertex.line,
                          std::to_string(vertex.count) + " vertices cannot fit in the " + std::to_string(remaining) +
-                             " bytes of data left");
+                             " bytes of data left: the file is truncated, or the count is wrong",
+                         InputProblem::kTruncated);
   }
   builder.reserve(static_cast<std::size_t>(vertex.count));
   for (std::uint64_t i = 0; i < vertex.count; ++i) {
@@ -374,14 +395,21 @@ void read_ascii_data(LineReader& reader, const PlyHeader& header, detail::ScanBu
     index_ascii_instance(reader, vertex, tokens, token_of_property);
     std::array<double, 3> xyz{};
     for (std::size_t axis = 0; axis < 3; ++axis) {
-      const std::string_view token = tokens[token_of_property[header.xyz_properties[axis]]];
-      if (detail::parse_double(token, xyz[axis]) != detail::NumberStatus::kOk || !std::isfinite(xyz[axis])) {
-        reader.fail(std::string(1, static_cast<char>('x' + axis)) + " value " + detail::quoted(token) +
-                    " is not a finite number");
-      }
+      const std::size_t token_index = token_of_property[header.xyz_properties[axis]];
+      const std::string_view token = tokens[token_index];
+      const auto status = detail::parse_double(token, xyz[axis]);
+      if (status == detail::NumberStatus::kOk && !std::isinf(xyz[axis])) continue;  // NaN: dropped by the builder
+      const std::string problem = std::string(1, static_cast<char>('x' + axis)) + " value " + detail::quoted(token) +
+                                  " is not a finite number";
+      if (status != detail::NumberStatus::kNotANumber) reader.fail(problem, InputProblem::kNonFinite);
+      if (token_index + 1 == tokens.size()) reader.fail_short_line(problem);
+      reader.fail(problem);
     }
     const auto added = builder.add(xyz[0], xyz[1], xyz[2]);
-    if (added != detail::ScanBuilder::AddResult::kOk) reader.fail(builder.describe(added));
+    if (added != detail::ScanBuilder::AddResult::kOk) reader.fail(builder.describe(added), builder.problem_of(added));
+  }
+  if (builder.size() == 0) {
+    detail::fail_at_line(reader.path(), vertex.line, builder.no_points_message(), builder.no_points_problem());
   }
 }
 

@@ -14,13 +14,19 @@ ScanBuilder::ScanBuilder(const std::filesystem::path& path, const ReadSettings& 
       scale_to_cm_(centimetres_per(unit_)),
       right_handed_to_3dtk_(settings.right_handed_to_3dtk),
       points_per_slice_(settings.points_per_slice),
-      max_points_(settings.max_points) {}
+      max_points_(settings.max_points),
+      report_(settings.report) {}
 
 ScanBuilder::AddResult ScanBuilder::add(double x, double y, double z) {
+  if (std::isnan(x) || std::isnan(y) || std::isnan(z)) {
+    ++nan_dropped_;
+    return AddResult::kOk;
+  }
   if (points_cm_.size() >= max_points_) return AddResult::kTooManyPoints;
   const Eigen::Vector3d p_file(x, y, z);
   const Eigen::Vector3d p_cm = right_handed_to_3dtk_ ? right_handed_to_3dtk(p_file, scale_to_cm_) : p_file * scale_to_cm_;
   if (!p_cm.allFinite()) return AddResult::kOutOfFloatRange;  // finite metres near DBL_MAX overflow as cm
+  if (!(p_cm.cwiseAbs().maxCoeff() <= kMaxPlausibleCoordinate_cm)) return AddResult::kImplausible;
   if (!origin_chosen_) {
     origin_chosen_ = true;
     if (p_cm.norm() > kAnchorDistance_cm) local_origin_cm_ = p_cm.array().round().matrix();
@@ -36,10 +42,20 @@ std::string ScanBuilder::describe(AddResult result) const {
   if (result == AddResult::kTooManyPoints) {
     return "more than " + std::to_string(max_points_) + " points (ReadSettings::max_points)";
   }
+  if (result == AddResult::kImplausible) {
+    return "coordinate beyond 1e10 cm (100000 km): not a point of a survey (binary garbage, or the wrong format or "
+           "unit?)";
+  }
   return "coordinate out of range: the point does not fit a float in cm";
 }
 
+std::string ScanBuilder::no_points_message() const {
+  if (nan_dropped_ == 0) return "no points";
+  return "no points: all " + std::to_string(nan_dropped_) + " are NaN (no-return markers)";
+}
+
 Scan ScanBuilder::finish(bool split_unmarked) {
+  if (report_ != nullptr) report_->nan_points_dropped += nan_dropped_;
   Scan scan;
   scan.name = path_.stem().string();
   scan.source_path = path_.string();

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "minemap/core/error.hpp"
 #include "minemap/core/scan.hpp"
 #include "minemap/io/formats.hpp"
 
@@ -23,13 +24,17 @@ namespace minemap::io::detail {
 inline constexpr double kFarFromOrigin_cm = 10000.0;
 /// A first point farther out than this anchors the points before they are converted to float.
 inline constexpr double kAnchorDistance_cm = 100000.0;
+/// No coordinate of a real survey lies farther out (10^5 km; Earth-centred coordinates stay below
+/// 10^4 km). Binary garbage read as float32 does, about 4 values in 10.
+inline constexpr double kMaxPlausibleCoordinate_cm = 1e10;
 
 class ScanBuilder {
  public:
   enum class AddResult {
-    kOk,
-    kTooManyPoints,   ///< more than ReadSettings::max_points
-    kOutOfFloatRange  ///< the point, relative to the local origin, does not fit a float
+    kOk,               ///< added, or dropped as a NaN point (counted, see nan_dropped())
+    kTooManyPoints,    ///< more than ReadSettings::max_points
+    kOutOfFloatRange,  ///< the point, relative to the local origin, does not fit a float
+    kImplausible       ///< a coordinate beyond kMaxPlausibleCoordinate_cm
   };
 
   ScanBuilder(const std::filesystem::path& path, const ReadSettings& settings, LengthUnit default_unit);
@@ -39,9 +44,18 @@ class ScanBuilder {
   std::size_t size() const { return points_cm_.size(); }
   void reserve(std::size_t count) { points_cm_.reserve(count); }
 
-  /// Adds a point given in the file's unit and frame (finite values; callers check, as only they
-  /// know the line or byte to report).
+  /// Adds a point given in the file's unit and frame. A point with a NaN coordinate is dropped and
+  /// counted; callers refuse infinite values first, as only they know the line or byte to report.
   [[nodiscard]] AddResult add(double x, double y, double z);
+
+  /// Points dropped because a coordinate was NaN.
+  std::uint64_t nan_dropped() const { return nan_dropped_; }
+
+  /// Message and kind for a file that gave no point: all NaN (kNonFinite) or none at all (kEmpty).
+  std::string no_points_message() const;
+  InputProblem no_points_problem() const {
+    return nan_dropped_ > 0 ? InputProblem::kNonFinite : InputProblem::kEmpty;
+  }
 
   /// Marks the start of a slice at the current point (uos "# slice N" markers).
   void begin_slice() { slice_starts_.push_back(points_cm_.size()); }
@@ -50,8 +64,11 @@ class ScanBuilder {
   /// ReadSettings::points_per_slice when `split_unmarked` is set, else there are none.
   Scan finish(bool split_unmarked);
 
-  /// Message for a failed add(), for the caller to throw at its location.
+  /// Message and kind for a failed add(), for the caller to throw at its location.
   std::string describe(AddResult result) const;
+  static InputProblem problem_of(AddResult result) {
+    return result == AddResult::kTooManyPoints ? InputProblem::kCountBeyondLimits : InputProblem::kMalformed;
+  }
 
  private:
   std::filesystem::path path_;
@@ -60,6 +77,8 @@ class ScanBuilder {
   bool right_handed_to_3dtk_;
   std::uint32_t points_per_slice_;
   std::uint64_t max_points_;
+  ReadReport* report_;
+  std::uint64_t nan_dropped_ = 0;
   bool origin_chosen_ = false;
   Eigen::Vector3d local_origin_cm_ = Eigen::Vector3d::Zero();
   std::vector<Eigen::Vector3f> points_cm_;

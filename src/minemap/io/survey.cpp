@@ -4,17 +4,27 @@
 // Choices:
 //  - A folder holding scans of two layouts (e.g. *.pcd and scanNNN.3d) is refused rather than
 //    guessed at; so is a folder with none.
-//  - uos numbering may have gaps (scan000, scan002, ...): scans are kept in number order. Two files
-//    with the same number (scan001.3d and scan0001.3d) are an error.
+//  - uos (and KITTI) numbering may have gaps (scan000, scan002, ...): scans are kept in number order
+//    and the gap is a Survey::warnings line naming the missing numbers. A .pose file holds absolute
+//    odometry, so nothing is lost but the overlap of the missing scan (3DTK's -s/-e range would stop
+//    reading at the gap instead). Two files with the same number (scan001.3d and scan0001.3d), or two
+//    scans with exactly the same points (a copied file), are an error naming both files.
 //  - uos: every scanNNN.3d needs scanNNN.pose unless `initial_poses` is given (then the .pose files
 //    are not read). truth/ is optional, but if it holds any scanNNN.pose it must hold all of them.
 //  - pcd: a scan's initial pose is its file's VIEWPOINT (read_pcd; the identity in practice) unless
 //    `initial_poses` is given; ply and kitti start from the identity.
 //  - One unit for the whole folder: ReadSettings::unit, else the format's default, applies to the
 //    points, the .pose files, truth and `initial_poses` alike; so does right_handed_to_3dtk.
-//  - Scans are read one after another, so the first bad file in name order is the one reported.
+//  - Scans are read one after another, so the first bad file in name order is the one reported; the
+//    checks of the survey as a whole (too few points, duplicates, units) come after every file parsed.
+//  - Units: with the unit left to uos' default (cm), a survey whose every scan (of >= 100 points)
+//    spans less than 1 m is refused (kSuspiciousUnits): that is a survey in metres read as cm, which
+//    the cm thresholds (25 cm pairs, 10 cm reduction) would silently fail to register. An explicit
+//    unit (--unit cm) is trusted. The other direction (cm read as m) is not guessed at: surveys in
+//    metres spanning kilometres are real.
 #include <algorithm>
 #include <cstdio>
+#include <cstring>
 #include <map>
 #include <string>
 #include <system_error>
@@ -78,7 +88,8 @@ FolderContent list_folder(const fs::path& dir) {
     if (const auto number = uos_scan_number(file_name)) {
       const auto [existing, inserted] = content.uos.emplace(*number, path);
       if (!inserted) {
-        detail::fail_in_file(path.string(), "has the same scan number as " + existing->second.filename().string());
+        detail::fail_in_file(path.string(), "has the same scan number as " + existing->second.filename().string(),
+                             InputProblem::kInconsistentSurvey);
       }
     } else if (path.extension() == ".pcd") {
       content.pcd.push_back(path);
@@ -103,8 +114,10 @@ std::vector<Pose> read_pose_list(const fs::path& path, LengthUnit unit, std::siz
                                  const ReadSettings& settings) {
   std::vector<Pose> poses = read_trajectory(path, unit);
   if (poses.size() != expected_count) {
-    detail::fail_in_file(path.string(), "has " + std::to_string(poses.size()) + " poses, the survey has " +
-                                            std::to_string(expected_count) + " scans");
+    detail::fail_in_file(path.string(),
+                         "has " + std::to_string(poses.size()) + " poses, the survey has " +
+                             std::to_string(expected_count) + " scans",
+                         InputProblem::kInconsistentSurvey);
   }
   for (Pose& pose : poses) pose = in_3dtk_frame(pose, settings);
   return poses;
@@ -114,16 +127,39 @@ Pose read_pose_file(const fs::path& path, LengthUnit unit, const ReadSettings& s
   return in_3dtk_frame(euler_to_pose(read_uos_pose(path, unit)), settings);
 }
 
-void read_uos_layout(const fs::path& dir, const FolderContent& content, const SurveyReadSettings& settings, Survey& survey) {
+/// NaN points dropped per file, for one warning line.
+struct DroppedPoints {
+  std::vector<std::pair<std::string, std::uint64_t>> files;  ///< file name, NaN points dropped
+  std::uint64_t total = 0;
+};
+
+/// Reads one scan file with `read`, counting the NaN points it drops.
+template <class Read>
+Scan read_counting(const fs::path& path, const ReadSettings& settings, DroppedPoints& dropped, Read&& read) {
+  ReadReport report;
+  ReadSettings counted = settings;
+  counted.report = &report;
+  Scan scan = read(path, counted);
+  if (report.nan_points_dropped > 0) {
+    dropped.files.emplace_back(path.filename().string(), report.nan_points_dropped);
+    dropped.total += report.nan_points_dropped;
+  }
+  return scan;
+}
+
+void read_uos_layout(const fs::path& dir, const FolderContent& content, const SurveyReadSettings& settings, Survey& survey,
+                     DroppedPoints& dropped) {
   const bool need_pose_files = !settings.initial_poses.has_value();
   std::size_t truth_files = 0;
   for (const auto& [number, path] : content.uos) {
-    Scan scan = read_uos_points(path, settings.read);
+    Scan scan = read_counting(path, settings.read, dropped,
+                              [](const fs::path& p, const ReadSettings& s) { return read_uos_points(p, s); });
     if (need_pose_files) {
       const fs::path pose_path = fs::path(path).replace_extension(".pose");
       if (!fs::exists(pose_path)) {
-        detail::fail_in_file(pose_path.string(), "missing: " + path.filename().string() +
-                                                     " needs its pose file (or give initial poses)");
+        detail::fail_in_file(pose_path.string(),
+                             "missing: " + path.filename().string() + " needs its pose file (or give initial poses)",
+                             InputProblem::kInconsistentSurvey);
       }
       scan.pose_cm = read_pose_file(pose_path, survey.unit, settings.read);
     }
@@ -135,11 +171,126 @@ void read_uos_layout(const fs::path& dir, const FolderContent& content, const Su
   for (const Scan& scan : survey.scans) {
     const fs::path truth_path = dir / "truth" / (scan.name + ".pose");
     if (!fs::exists(truth_path)) {
-      detail::fail_in_file(truth_path.string(), "missing: truth/ has poses for some scans, so it needs all of them");
+      detail::fail_in_file(truth_path.string(), "missing: truth/ has poses for some scans, so it needs all of them",
+                           InputProblem::kInconsistentSurvey);
     }
     truth.push_back(read_pose_file(truth_path, survey.unit, settings.read));
   }
   survey.truth_cm = std::move(truth);
+}
+
+/// "scan001, scan004..scan006" for the numbers missing between the first and the last of `numbers`
+/// (sorted), named by `name_of`; empty when there is no gap.
+template <class NameOf>
+std::string describe_gaps(const std::vector<std::uint64_t>& numbers, NameOf&& name_of) {
+  constexpr int kMaxRangesShown = 8;
+  std::string text;
+  int ranges = 0;
+  for (std::size_t k = 1; k < numbers.size(); ++k) {
+    if (numbers[k] <= numbers[k - 1] + 1) continue;
+    const std::uint64_t first = numbers[k - 1] + 1, last = numbers[k] - 1;
+    if (++ranges > kMaxRangesShown) {
+      text += ", ...";
+      break;
+    }
+    if (!text.empty()) text += ", ";
+    text += name_of(first);
+    if (last > first) text += ".." + name_of(last);
+  }
+  return text;
+}
+
+std::string kitti_stem(std::uint64_t number) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%06llu", static_cast<unsigned long long>(number));
+  return buffer;
+}
+
+/// The number of a KITTI file or folder name ("000007.bin", "000007"); all digits by construction.
+std::uint64_t kitti_number(const fs::path& path) {
+  std::uint64_t number = 0;
+  detail::parse_uint64(path.stem().string(), number);
+  return number;
+}
+
+std::string file_of(const Scan& scan) { return scan.source_path.empty() ? scan.name : scan.source_path; }
+
+/// Every scan needs kMinScanPoints points: fewer can never be registered.
+void check_scan_sizes(const std::vector<Scan>& scans) {
+  for (const Scan& scan : scans) {
+    if (scan.size() >= kMinScanPoints) continue;
+    detail::fail_in_file(file_of(scan),
+                         "holds only " + std::to_string(scan.size()) + (scan.size() == 1 ? " point" : " points") +
+                             "; a scan needs at least " + std::to_string(kMinScanPoints) + " to be registered",
+                         InputProblem::kEmpty);
+  }
+}
+
+/// Two scans with exactly the same points are one file copied twice (a real scanner never repeats
+/// its noise); matching a scan against its copy would only hide the mistake.
+void check_duplicate_scans(const std::vector<Scan>& scans) {
+  std::map<std::uint64_t, std::size_t> by_hash;
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    const Scan& scan = scans[i];
+    std::uint64_t hash = 1469598103934665603ull;  // FNV-1a over the point bytes and the local origin
+    const auto mix = [&](const void* data, std::size_t bytes) {
+      const auto* p = static_cast<const unsigned char*>(data);
+      for (std::size_t b = 0; b < bytes; ++b) hash = (hash ^ p[b]) * 1099511628211ull;
+    };
+    mix(scan.points_cm.data(), scan.points_cm.size() * sizeof(Eigen::Vector3f));
+    mix(scan.local_origin_cm.data(), 3 * sizeof(double));
+    const auto [it, inserted] = by_hash.emplace(hash, i);
+    if (inserted) continue;
+    const Scan& first = scans[it->second];
+    if (first.points_cm == scan.points_cm && first.local_origin_cm == scan.local_origin_cm) {
+      detail::fail_in_file(file_of(scan),
+                           "holds exactly the same " + std::to_string(scan.size()) + " points as " +
+                               fs::path(file_of(first)).filename().string() +
+                               " (a copied file?): remove one of them",
+                           InputProblem::kInconsistentSurvey);
+    }
+  }
+}
+
+/// The units check (formats.hpp, kSuspiciousScanDiagonal_cm): only for the uos default unit.
+void check_units(const std::vector<Scan>& scans) {
+  const Scan* largest = nullptr;
+  double largest_diagonal_cm = 0.0;
+  for (const Scan& scan : scans) {
+    if (scan.size() < kUnitCheckMinPoints) continue;
+    Eigen::Vector3f lo = scan.points_cm.front(), hi = scan.points_cm.front();
+    for (const Eigen::Vector3f& p : scan.points_cm) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    const double diagonal_cm = (hi - lo).cast<double>().norm();
+    if (largest == nullptr || diagonal_cm > largest_diagonal_cm) {
+      largest = &scan;
+      largest_diagonal_cm = diagonal_cm;
+    }
+  }
+  if (largest == nullptr || largest_diagonal_cm >= kSuspiciousScanDiagonal_cm) return;
+  char extent[64];
+  std::snprintf(extent, sizeof extent, "%.3g cm", largest_diagonal_cm);
+  detail::fail_in_file(file_of(*largest),
+                       std::string("spans only ") + extent + " (bounding-box diagonal of " +
+                           std::to_string(largest->size()) +
+                           " points) read in cm, uos' default unit, and no scan of the survey spans more: is it in "
+                           "metres? Map it with --unit m (or --unit cm if it really is this small)",
+                       InputProblem::kSuspiciousUnits);
+}
+
+std::string describe_dropped(const DroppedPoints& dropped) {
+  constexpr std::size_t kMaxFilesShown = 5;
+  std::string text = "dropped " + std::to_string(dropped.total) + " point" + (dropped.total == 1 ? "" : "s") +
+                     " with a NaN coordinate (no-return markers) in " + std::to_string(dropped.files.size()) +
+                     (dropped.files.size() == 1 ? " file: " : " files: ");
+  for (std::size_t k = 0; k < dropped.files.size() && k < kMaxFilesShown; ++k) {
+    if (k > 0) text += ", ";
+    text += dropped.files[k].first + " (" + std::to_string(dropped.files[k].second) + ")";
+  }
+  if (dropped.files.size() > kMaxFilesShown) text += ", ...";
+  return text;
 }
 
 }  // namespace
@@ -149,38 +300,67 @@ Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
   const int layouts = !content.uos.empty() + !content.pcd.empty() + !content.ply.empty() +
                       !content.kitti_bin.empty() + !content.kitti_xyz_dirs.empty();
   if (layouts == 0) {
-    detail::fail_in_file(dir.string(), "no scans found (expected scanNNN.3d, *.pcd, *.ply, NNNNNN.bin or NNNNNN/points.bin)");
+    detail::fail_in_file(dir.string(), "no scans found (expected scanNNN.3d, *.pcd, *.ply, NNNNNN.bin or NNNNNN/points.bin)",
+                         InputProblem::kEmpty);
   }
   if (layouts > 1) {
-    detail::fail_in_file(dir.string(), "holds scans of several layouts (" + std::to_string(content.uos.size()) + " .3d, " +
-                                           std::to_string(content.pcd.size()) + " .pcd, " +
-                                           std::to_string(content.ply.size()) + " .ply, " +
-                                           std::to_string(content.kitti_bin.size() + content.kitti_xyz_dirs.size()) +
-                                           " KITTI .bin); put each survey in its own folder");
+    detail::fail_in_file(dir.string(),
+                         "holds scans of several layouts (" + std::to_string(content.uos.size()) + " .3d, " +
+                             std::to_string(content.pcd.size()) + " .pcd, " + std::to_string(content.ply.size()) +
+                             " .ply, " + std::to_string(content.kitti_bin.size() + content.kitti_xyz_dirs.size()) +
+                             " KITTI .bin); put each survey in its own folder",
+                         InputProblem::kInconsistentSurvey);
+  }
+  if (settings.initial_poses) {
+    std::error_code error;
+    if (!fs::exists(*settings.initial_poses, error)) {
+      detail::fail_in_file(settings.initial_poses->string(), "missing: the initial poses file does not exist",
+                           InputProblem::kInconsistentSurvey);
+    }
   }
   Survey survey;
+  DroppedPoints dropped;
+  std::vector<std::uint64_t> numbers;  // uos / KITTI scan numbers in order, for the gaps warning
+  std::string (*name_of)(std::uint64_t) = kitti_stem;
   const ReadSettings& read = settings.read;
   if (!content.uos.empty()) {
     survey.format = "uos";
     survey.unit = read.unit.value_or(LengthUnit::kCentimetre);
-    read_uos_layout(dir, content, settings, survey);
+    read_uos_layout(dir, content, settings, survey, dropped);
+    for (const auto& entry : content.uos) numbers.push_back(entry.first);
+    name_of = [](std::uint64_t number) { return uos_stem(static_cast<std::size_t>(number)); };
   } else if (!content.pcd.empty()) {
     survey.format = "pcd";
     survey.unit = read.unit.value_or(LengthUnit::kMetre);
-    for (const fs::path& path : content.pcd) survey.scans.push_back(read_pcd(path, read));  // pose = VIEWPOINT
+    for (const fs::path& path : content.pcd) {  // pose = VIEWPOINT
+      survey.scans.push_back(
+          read_counting(path, read, dropped, [](const fs::path& p, const ReadSettings& s) { return read_pcd(p, s); }));
+    }
   } else if (!content.ply.empty()) {
     survey.format = "ply";
     survey.unit = read.unit.value_or(LengthUnit::kMetre);
-    for (const fs::path& path : content.ply) survey.scans.push_back(read_ply(path, read));
+    for (const fs::path& path : content.ply) {
+      survey.scans.push_back(
+          read_counting(path, read, dropped, [](const fs::path& p, const ReadSettings& s) { return read_ply(p, s); }));
+    }
   } else {
     survey.format = "kitti";
     survey.unit = read.unit.value_or(LengthUnit::kMetre);
-    for (const fs::path& path : content.kitti_bin) survey.scans.push_back(read_kitti_bin(path, read, 4));
+    for (const fs::path& path : content.kitti_bin) {
+      survey.scans.push_back(read_counting(path, read, dropped, [](const fs::path& p, const ReadSettings& s) {
+        return read_kitti_bin(p, s, 4);
+      }));
+      numbers.push_back(kitti_number(path));
+    }
     for (const fs::path& folder : content.kitti_xyz_dirs) {
-      Scan scan = read_kitti_bin(folder / "points.bin", read, 3);
+      Scan scan = read_counting(folder / "points.bin", read, dropped,
+                                [](const fs::path& p, const ReadSettings& s) { return read_kitti_bin(p, s, 3); });
       scan.name = folder.filename().string();  // "000002", not "points"
       survey.scans.push_back(std::move(scan));
+      numbers.push_back(kitti_number(folder));
     }
+    // Both KITTI layouts in one folder would interleave; numbers are only meaningful for one.
+    if (!content.kitti_bin.empty() && !content.kitti_xyz_dirs.empty()) numbers.clear();
     const fs::path graph = dir / "graph.txt";
     if (fs::exists(graph)) survey.truth_cm = read_pose_list(graph, survey.unit, survey.scans.size(), read);
   }
@@ -188,6 +368,17 @@ Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
     const std::vector<Pose> poses = read_pose_list(*settings.initial_poses, survey.unit, survey.scans.size(), read);
     for (std::size_t i = 0; i < poses.size(); ++i) survey.scans[i].pose_cm = poses[i];
   }
+
+  // The survey as a whole, now that every file parsed.
+  check_scan_sizes(survey.scans);
+  check_duplicate_scans(survey.scans);
+  if (!read.unit && survey.unit == LengthUnit::kCentimetre) check_units(survey.scans);
+  std::sort(numbers.begin(), numbers.end());
+  if (const std::string gaps = describe_gaps(numbers, name_of); !gaps.empty()) {
+    survey.warnings.push_back("the scan numbering has gaps: no " + gaps +
+                              "; the scans on either side of a gap are matched to each other");
+  }
+  if (dropped.total > 0) survey.warnings.push_back(describe_dropped(dropped));
   return survey;
 }
 

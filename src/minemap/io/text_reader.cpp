@@ -39,14 +39,16 @@ std::string read_file_bytes(const std::filesystem::path& path) {
   return bytes;
 }
 
-void fail_in_file(const std::string& path, const std::string& message) { throw InputError(FileLocation{path}, message); }
-
-void fail_at_line(const std::string& path, std::int64_t line, const std::string& message) {
-  throw InputError(FileLocation{path, line, -1}, message);
+void fail_in_file(const std::string& path, const std::string& message, InputProblem problem) {
+  throw InputError(FileLocation{path}, message, problem);
 }
 
-void fail_at_byte(const std::string& path, std::uint64_t byte_offset, const std::string& message) {
-  throw InputError(FileLocation{path, 0, static_cast<std::int64_t>(byte_offset)}, message);
+void fail_at_line(const std::string& path, std::int64_t line, const std::string& message, InputProblem problem) {
+  throw InputError(FileLocation{path, line, -1}, message, problem);
+}
+
+void fail_at_byte(const std::string& path, std::uint64_t byte_offset, const std::string& message, InputProblem problem) {
+  throw InputError(FileLocation{path, 0, static_cast<std::int64_t>(byte_offset)}, message, problem);
 }
 
 NumberStatus parse_double(std::string_view token, double& value) {
@@ -95,9 +97,17 @@ void parse_finite_values(const LineReader& reader, std::span<const std::string_v
   for (std::size_t i = 0; i < values.size(); ++i) {
     const NumberStatus status = parse_double(tokens[i], values[i]);
     const std::string which = std::string(what) + " value " + std::to_string(i + 1);
-    if (status == NumberStatus::kNotANumber) reader.fail(which + " " + quoted(tokens[i]) + " is not a number");
-    if (status == NumberStatus::kOutOfRange) reader.fail(which + " " + quoted(tokens[i]) + " is out of range");
-    if (!std::isfinite(values[i])) reader.fail(which + " " + quoted(tokens[i]) + " is not finite");
+    if (status == NumberStatus::kNotANumber) {
+      // A number cut off by the end of the file ("1.5e") is a truncation, not garbage.
+      if (i + 1 == tokens.size() && reader.at_unterminated_end()) {
+        reader.fail_short_line(which + " " + quoted(tokens[i]) + " is not a number");
+      }
+      reader.fail(which + " " + quoted(tokens[i]) + " is not a number");
+    }
+    if (status == NumberStatus::kOutOfRange) {
+      reader.fail(which + " " + quoted(tokens[i]) + " is out of range", InputProblem::kNonFinite);
+    }
+    if (!std::isfinite(values[i])) reader.fail(which + " " + quoted(tokens[i]) + " is not finite", InputProblem::kNonFinite);
   }
 }
 

@@ -21,9 +21,13 @@ namespace minemap::io::detail {
 /// The file's bytes. InputError naming the file when it is missing, a folder or unreadable.
 std::string read_file_bytes(const std::filesystem::path& path);
 
-[[noreturn]] void fail_in_file(const std::string& path, const std::string& message);
-[[noreturn]] void fail_at_line(const std::string& path, std::int64_t line, const std::string& message);
-[[noreturn]] void fail_at_byte(const std::string& path, std::uint64_t byte_offset, const std::string& message);
+/// Throw InputError at a place in the file; `problem` picks the kind (and the exit code).
+[[noreturn]] void fail_in_file(const std::string& path, const std::string& message,
+                               InputProblem problem = InputProblem::kMalformed);
+[[noreturn]] void fail_at_line(const std::string& path, std::int64_t line, const std::string& message,
+                               InputProblem problem = InputProblem::kMalformed);
+[[noreturn]] void fail_at_byte(const std::string& path, std::uint64_t byte_offset, const std::string& message,
+                               InputProblem problem = InputProblem::kMalformed);
 
 /// Walks `text` line by line. Lines are returned without their terminator ('\n', "\r\n").
 class LineReader {
@@ -49,7 +53,22 @@ class LineReader {
   const std::string& path() const { return path_; }
 
   /// InputError at the line last returned.
-  [[noreturn]] void fail(const std::string& message) const { fail_at_line(path_, line_number_, message); }
+  [[noreturn]] void fail(const std::string& message, InputProblem problem = InputProblem::kMalformed) const {
+    fail_at_line(path_, line_number_, message, problem);
+  }
+
+  /// Whether the line last returned is the file's last and has no line end: a file cut off in the
+  /// middle of a line (a copy that stopped early) looks like this.
+  bool at_unterminated_end() const {
+    return line_number_ > 0 && offset_ == text_.size() && !text_.empty() && text_.back() != '\n';
+  }
+
+  /// For a line with too few values: a truncated file (kTruncated) when the line is the unterminated
+  /// last one, else a malformed line.
+  [[noreturn]] void fail_short_line(const std::string& message) const {
+    if (at_unterminated_end()) fail("file ends inside this line (truncated): " + message, InputProblem::kTruncated);
+    fail(message);
+  }
 
  private:
   std::string_view text_;
@@ -109,7 +128,8 @@ bool parse_int64(std::string_view token, std::int64_t& value);
 /// Quotes a token for an error message, shortened so a binary blob does not flood the terminal.
 std::string quoted(std::string_view token);
 
-/// Parses tokens[i] into values[i] as finite doubles; fails at the reader's line otherwise.
+/// Parses tokens[i] into values[i] as finite doubles; fails at the reader's line otherwise (a value
+/// that is not a number: kMalformed; inf, NaN or beyond double range: kNonFinite).
 /// `what` names the values for the message ("pose", "point").
 void parse_finite_values(const LineReader& reader, std::span<const std::string_view> tokens, std::span<double> values,
                          std::string_view what);

@@ -17,7 +17,7 @@ namespace minemap::io {
 namespace detail {
 
 Pose checked_rigid_pose(const Pose& raw, const LineReader& reader) {
-  if (!raw.allFinite()) reader.fail("pose has a value out of range");
+  if (!raw.allFinite()) reader.fail("pose has a value out of range", InputProblem::kNonFinite);
   const Eigen::Matrix3d rotation = raw.block<3, 3>(0, 0);
   const double orthonormality_error = (rotation * rotation.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
   if (!(orthonormality_error <= kRotationTolerance)) {
@@ -41,7 +41,7 @@ Pose pose_from_quaternion(const Eigen::Vector3d& translation_cm, double qw, doub
     append_number(message, norm);
     reader.fail(message + ")");
   }
-  if (!translation_cm.allFinite()) reader.fail("translation out of range");
+  if (!translation_cm.allFinite()) reader.fail("translation out of range", InputProblem::kNonFinite);
   q.normalize();
   Pose pose = Pose::Identity();
   pose.block<3, 3>(0, 0) = q.toRotationMatrix();
@@ -73,14 +73,16 @@ void for_each_data_line(LineReader& reader, OnLine&& on_line) {
 
 void require_value_count(const LineReader& reader, std::size_t count, std::size_t expected, std::string_view layout) {
   if (count != expected) {
-    reader.fail("expected " + std::to_string(expected) + " values (" + std::string(layout) + "), found " +
-                std::to_string(count));
+    const std::string problem =
+        "expected " + std::to_string(expected) + " values (" + std::string(layout) + "), found " + std::to_string(count);
+    if (count < expected) reader.fail_short_line(problem);
+    reader.fail(problem);
   }
 }
 
 template <class T>
 void require_some(const std::vector<T>& poses, const LineReader& reader) {
-  if (poses.empty()) detail::fail_at_line(reader.path(), reader.line_number(), "no poses");
+  if (poses.empty()) detail::fail_at_line(reader.path(), reader.line_number(), "no poses", InputProblem::kEmpty);
 }
 
 void append_row(std::string& out, std::span<const double> values) {
@@ -134,7 +136,8 @@ std::vector<Pose> read_matrix_poses(const fs::path& path, LengthUnit unit) {
   });
   if (rows_read != 0) {
     detail::fail_at_line(path.string(), reader.line_number(),
-                         "file ends inside a matrix (" + std::to_string(rows_read) + " of 4 rows)");
+                         "file ends inside a matrix (" + std::to_string(rows_read) + " of 4 rows)",
+                         InputProblem::kTruncated);
   }
   require_some(poses, reader);
   return poses;
@@ -247,7 +250,8 @@ std::vector<Pose> read_graph_poses(const fs::path& path, LengthUnit unit) {
       detail::fail_at_line(path.string(), vertices[k].line,
                            duplicate ? "vertex v" + std::to_string(vertices[k].index) + " appears twice"
                                      : "no vertex v" + std::to_string(k) + " (vertices must be v0..v" +
-                                           std::to_string(vertices.size() - 1) + ")");
+                                           std::to_string(vertices.size() - 1) + ")",
+                           InputProblem::kInconsistentSurvey);
     }
     poses.push_back(vertices[k].pose_cm);
   }
@@ -282,7 +286,7 @@ TrajectoryFormat detect_trajectory_format(const fs::path& path) {
     reader.fail("cannot tell the trajectory format from a line of " + std::to_string(count) +
                 " values (expected vK + 7 for a graph, 8 for TUM, 12 for KITTI, 4 or 16 for 4x4 matrices)");
   }
-  detail::fail_at_line(path.string(), reader.line_number(), "no poses");
+  detail::fail_at_line(path.string(), reader.line_number(), "no poses", InputProblem::kEmpty);
 }
 
 std::vector<Pose> read_trajectory(const fs::path& path, LengthUnit unit) {

@@ -92,17 +92,25 @@ Scan read_uos_points(const fs::path& path, const ReadSettings& settings) {
     }
     const std::size_t count = detail::split_tokens(content, tokens);
     std::string problem;  // why the line is not a point line; empty when it is one
+    bool cut_short = false;  // the problem is one a file cut off inside this line would show
     if (count < 3 || count > 4) {
       problem = "expected 3 values (x y z) or 4 (x y z reflectance), found " + std::to_string(count);
+      cut_short = count < 3;
     } else if (columns != 0 && count != columns) {
       problem = "expected " + std::to_string(columns) + " values as on line " + std::to_string(first_point_line) +
                 ", found " + std::to_string(count);
+      cut_short = count < columns;
     } else {
       for (std::size_t i = 0; i < count && problem.empty(); ++i) {
         const NumberStatus status = detail::parse_double(tokens[i], values[i]);
-        if (status == NumberStatus::kNotANumber) problem = detail::quoted(tokens[i]) + " is not a number";
+        if (status == NumberStatus::kNotANumber) {
+          problem = detail::quoted(tokens[i]) + " is not a number";
+          cut_short = i + 1 == count;
+        }
         // A number that strtod would read as +-inf or 0 is not a header line: it is a broken point.
-        if (status == NumberStatus::kOutOfRange) reader.fail(detail::quoted(tokens[i]) + " is out of range");
+        if (status == NumberStatus::kOutOfRange) {
+          reader.fail(detail::quoted(tokens[i]) + " is out of range", InputProblem::kNonFinite);
+        }
       }
     }
     if (!problem.empty()) {
@@ -113,21 +121,26 @@ Scan read_uos_points(const fs::path& path, const ReadSettings& settings) {
         }
         continue;
       }
+      if (cut_short) reader.fail_short_line(problem);
       reader.fail(problem);
     }
     if (columns == 0) {
       columns = count;
       first_point_line = reader.line_number();
     }
-    for (std::size_t i = 0; i < count; ++i) {
-      if (!std::isfinite(values[i])) reader.fail("value " + std::to_string(i + 1) + " " + detail::quoted(tokens[i]) + " is not finite");
+    // x y z: NaN drops the point (ScanBuilder), inf fails it. The reflectance is not used.
+    for (std::size_t i = 0; i < 3; ++i) {
+      if (std::isinf(values[i])) {
+        reader.fail("value " + std::to_string(i + 1) + " " + detail::quoted(tokens[i]) + " is not finite",
+                    InputProblem::kNonFinite);
+      }
     }
     const auto added = builder.add(values[0], values[1], values[2]);
-    if (added != detail::ScanBuilder::AddResult::kOk) reader.fail(builder.describe(added));
+    if (added != detail::ScanBuilder::AddResult::kOk) reader.fail(builder.describe(added), builder.problem_of(added));
   }
   if (builder.size() == 0) {
-    detail::fail_at_line(path.string(), reader.line_number(),
-                         reader.line_number() == 0 ? "no points (empty file)" : "no points");
+    if (text.empty()) detail::fail_in_file(path.string(), "no points (empty file)", InputProblem::kEmpty);
+    detail::fail_at_line(path.string(), reader.line_number(), builder.no_points_message(), builder.no_points_problem());
   }
   return builder.finish(/*split_unmarked=*/true);
 }
@@ -187,15 +200,22 @@ EulerPose read_uos_pose(const fs::path& path, LengthUnit unit) {
     detail::parse_finite_values(reader, std::span(tokens).first(count), std::span(values).subspan(found, count), "pose");
     found += count;
   }
+  if (found == 0) {
+    detail::fail_at_line(path.string(), reader.line_number(),
+                         std::string(text.empty() ? "empty file: " : "") +
+                             "found 0 numbers, expected 6 (x y z theta_x theta_y theta_z)",
+                         InputProblem::kEmpty);
+  }
   if (found < values.size()) {
     detail::fail_at_line(path.string(), reader.line_number(),
-                         "found " + std::to_string(found) + " numbers, expected 6 (x y z theta_x theta_y theta_z)");
+                         "found " + std::to_string(found) + " numbers, expected 6 (x y z theta_x theta_y theta_z): the file ends early",
+                         InputProblem::kTruncated);
   }
   EulerPose pose;
   pose.position_cm = Eigen::Vector3d(values[0], values[1], values[2]) * centimetres_per(unit);
   pose.angles_deg = Eigen::Vector3d(values[3], values[4], values[5]);
   if (!pose.position_cm.allFinite()) {
-    detail::fail_at_line(path.string(), reader.line_number(), "position out of range");
+    detail::fail_at_line(path.string(), reader.line_number(), "position out of range", InputProblem::kNonFinite);
   }
   return pose;
 }
@@ -230,7 +250,9 @@ std::vector<FrameLine> read_uos_frames(const fs::path& path, LengthUnit unit) {
     if (detail::is_blank(content)) continue;
     const std::size_t count = detail::split_tokens(content, tokens);
     if (count != tokens.size()) {
-      reader.fail("expected 16 matrix values and a type, found " + std::to_string(count) + " values");
+      const std::string problem = "expected 16 matrix values and a type, found " + std::to_string(count) + " values";
+      if (count < tokens.size()) reader.fail_short_line(problem);
+      reader.fail(problem);
     }
     detail::parse_finite_values(reader, std::span(tokens).first(16), values, "matrix");
     std::int64_t type = 0;
@@ -246,7 +268,7 @@ std::vector<FrameLine> read_uos_frames(const fs::path& path, LengthUnit unit) {
     raw.block<3, 1>(0, 3) *= scale_to_cm;
     frames.push_back(FrameLine{detail::checked_rigid_pose(raw, reader), static_cast<int>(type)});
   }
-  if (frames.empty()) detail::fail_at_line(path.string(), reader.line_number(), "no frames");
+  if (frames.empty()) detail::fail_at_line(path.string(), reader.line_number(), "no frames", InputProblem::kEmpty);
   return frames;
 }
 
