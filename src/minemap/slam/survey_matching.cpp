@@ -14,7 +14,8 @@ double seconds_since(Clock::time_point start) { return std::chrono::duration<dou
 
 /// Everything the matcher holds per scan: its prepared cloud and its current T_world_points.
 struct ScanState {
-  std::shared_ptr<const PreparedCloud> cloud;
+  std::shared_ptr<const PreparedCloud> cloud;        ///< data: matched against others
+  std::shared_ptr<const PreparedCloud> model_cloud;  ///< model: others are matched against it (may be `cloud`)
   Pose odometry = Pose::Identity();  ///< initial T_world_points
   Pose pose = Pose::Identity();      ///< current T_world_points
   Pose points_from_file = Pose::Identity();
@@ -82,12 +83,27 @@ class SurveyMatcher {
         }
         points = thin_unstructured(scan, settings_.unstructured_point_stride);
       }
+      // The denser model cloud (see MappingSettings::dense_models); none when it would equal the data.
+      std::vector<Eigen::Vector3f> model_points;
+      bool dense_model = false;
+      if (settings_.dense_models && scan.has_slices() && settings_.filter_enabled &&
+          settings_.model_slice_stride < settings_.filter.slice_stride) {
+        SliceFilterSettings model_filter = settings_.filter;
+        model_filter.slice_stride = settings_.model_slice_stride;
+        model_points = filter_scan(scan, model_filter, filter_backend, nullptr).points_cm;
+        dense_model = true;
+      } else if (settings_.dense_models && (!scan.has_slices() || !settings_.filter_enabled) &&
+                 settings_.unstructured_point_stride > 1) {
+        model_points = thin_unstructured(scan, 1);
+        dense_model = true;
+      }
       result_.times.filter_s += seconds_since(start);
       outcome.points_used = points.size();
       start = Clock::now();
       ScanState& state = states_[i];
       outcome.used_points_cm = points;
       state.cloud = backend_->prepare(std::move(points), settings_.tree);
+      state.model_cloud = dense_model ? backend_->prepare(std::move(model_points), settings_.tree) : state.cloud;
       state.odometry = scan.world_from_points();
       state.pose = state.odometry;
       state.points_from_file = rigid_inverse(scan.world_from_points()) * scan.pose_cm;
@@ -117,7 +133,7 @@ class SurveyMatcher {
 
   /// World bounds of scan i at its current pose, from its kd-tree's local box (8 corners).
   Bounds3d bounds_of(std::size_t i) const {
-    const KdTree& tree = states_[i].cloud->tree();
+    const KdTree& tree = states_[i].model_cloud->tree();
     if (tree.empty()) return {};
     const std::array<Eigen::Vector3f, 2> corners = {tree.bounds_min(), tree.bounds_max()};
     return world_bounds(corners, states_[i].pose);
@@ -142,7 +158,7 @@ class SurveyMatcher {
 
   std::vector<WorldModel> models_of(const std::vector<std::size_t>& indices) const {
     std::vector<WorldModel> models;
-    for (std::size_t j : indices) models.push_back({states_[j].cloud.get(), states_[j].pose});
+    for (std::size_t j : indices) models.push_back({states_[j].model_cloud.get(), states_[j].pose});
     return models;
   }
 
@@ -194,7 +210,7 @@ class SurveyMatcher {
       if (current == 0) continue;  // the master scan is fixed
       std::vector<std::size_t> neighbours;
       for (std::size_t j : nearby(current, newest + 1)) {
-        const WorldModel model{states_[j].cloud.get(), states_[j].pose};
+        const WorldModel model{states_[j].model_cloud.get(), states_[j].pose};
         const std::size_t pairs = count_pairs(*backend_, *states_[current].cloud, states_[current].pose, model,
                                               settings_.icp.max_pair_dist_cm);
         if (pairs > static_cast<std::size_t>(settings_.min_overlap_pairs)) neighbours.push_back(j);
@@ -275,6 +291,7 @@ bool MappingResult::all_registered() const {
 MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings,
                          const ProgressCallback& progress) {
   settings.filter.validate();
+  if (settings.model_slice_stride < 1) throw std::invalid_argument("model slice stride must be >= 1");
   return SurveyMatcher(scans, settings, progress).run();
 }
 
