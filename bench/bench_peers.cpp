@@ -60,11 +60,22 @@ const Pose& minemap_pose() {
   return pose;
 }
 
+/// The agreement rule: every peer lands within 1 mm of the others, so within 1 mm of minemap.
+constexpr double kAgreeCm = 0.1;
+constexpr double kAgreeDeg = 0.01;
+
 void record(benchmark::State& state, const Pose& pose, int iterations) {
   const Pose difference = rigid_inverse(minemap_pose()) * pose;
   state.counters["icp_iterations"] = iterations;
   state.counters["to_minemap_cm"] = translation_norm(difference);
   state.counters["to_minemap_deg"] = rotation_angle_deg(difference);
+  // A disagreement is an error in the JSON (error_occurred), which bench/run_benchmarks.sh reports
+  // and fails on: a peer comparison with different answers would compare different work.
+  if (translation_norm(difference) > kAgreeCm || rotation_angle_deg(difference) > kAgreeDeg) {
+    state.SkipWithError(("final pose " + std::to_string(translation_norm(difference)) + " cm / " +
+                         std::to_string(rotation_angle_deg(difference)) + " deg from minemap's (limit 1 mm)")
+                            .c_str());
+  }
 }
 
 void BM_Peers_minemap_cpu(benchmark::State& state) {

@@ -40,3 +40,13 @@ fi
 # Debian's python3 has python3-matplotlib (Fig. 5's PNG); a python3 earlier on PATH may not.
 python=python3; [ -x /usr/bin/python3 ] && python=/usr/bin/python3
 "$python" bench/make_tables.py "$out"
+# Peers that land on another pose than minemap's (more than 1 mm away) fail the run.
+if [ -f "$out/peers.json" ]; then
+  "$python" - "$out/peers.json" <<'PY'
+import json, sys
+bad = [b for b in json.load(open(sys.argv[1]))["benchmarks"] if b.get("error_occurred")]
+for b in bad:
+    print(f"peers disagree: {b['name']}: {b.get('error_message', '')}", file=sys.stderr)
+sys.exit(1 if bad else 0)
+PY
+fi

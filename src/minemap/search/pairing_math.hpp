@@ -161,16 +161,10 @@ inline std::int32_t approximate_leaf(const KdTree& tree, const Eigen::Vector3f& 
   return nodes[node].split_bits;
 }
 
-/// Brute force over every tree point (reordered order, as the OpenCL kernel).
+/// Brute force over every tree point (reordered order, as the OpenCL kernel), four at a time:
+/// scan_bucket keeps the sequential scan's result (first closest point, strict '<').
 inline void brute_force_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& best, std::int32_t& best_point) {
-  const KdPoint* points = tree.points().data();
-  for (std::int32_t i = 0, n = static_cast<std::int32_t>(tree.size()); i < n; ++i) {
-    const float d = squared_distance(points[i], q);
-    if (d < best) {
-      best = d;
-      best_point = i;
-    }
-  }
+  scan_bucket(tree.points().data(), 0, static_cast<std::int32_t>(tree.size()), q, best, best_point);
 }
 
 }  // namespace minemap::detail
