@@ -47,8 +47,9 @@ std::vector<Eigen::Vector3f> random_cloud(std::size_t count, float lo, float hi,
   return cloud;
 }
 
-int run_cli(const std::string& args, std::string* output) {
-  const std::string command = std::string(MINEMAP_CLI_PATH) + " " + args + " 2>&1";
+namespace {
+
+int run_command(const std::string& command, std::string* output) {
   FILE* pipe = ::popen(command.c_str(), "r");
   if (!pipe) throw std::runtime_error("popen failed");
   std::string text;
@@ -57,6 +58,26 @@ int run_cli(const std::string& args, std::string* output) {
   const int status = ::pclose(pipe);
   if (output) *output = text;
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+}  // namespace
+
+int run_cli(const std::string& args, std::string* output) {
+  return run_command(std::string(MINEMAP_CLI_PATH) + " " + args + " 2>&1", output);
+}
+
+int run_cli_with_env(const std::string& environment, const std::string& args, std::string* output) {
+  return run_command("env " + environment + " " + std::string(MINEMAP_CLI_PATH) + " " + args + " 2>&1", output);
+}
+
+std::vector<std::string> lines_containing(const std::string& text, const std::string& needle) {
+  std::vector<std::string> found;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.find(needle) != std::string::npos) found.push_back(line);
+  }
+  return found;
 }
 
 }  // namespace minemap::test

@@ -36,4 +36,11 @@ std::vector<Eigen::Vector3f> random_cloud(std::size_t count, float lo, float hi,
 /// Runs the minemap program with `args`; returns its exit code, stdout+stderr in `output`.
 int run_cli(const std::string& args, std::string* output = nullptr);
 
+/// As run_cli, with `environment` ("NAME=value NAME2=value2", shell words) set in the child only
+/// (through env(1)); the test process's own environment is left as it was.
+int run_cli_with_env(const std::string& environment, const std::string& args, std::string* output = nullptr);
+
+/// The lines of `text` that contain `needle`.
+std::vector<std::string> lines_containing(const std::string& text, const std::string& needle);
+
 }  // namespace minemap::test

@@ -1,5 +1,7 @@
 // The slice filter on an OpenCL device: one launch filters all kept slices of a scan, one
 // work-item per slice; each slice writes into its own input range (output never exceeds input).
+// A device that fails here (allocation, launch, transfer) throws DeviceError: the survey matcher
+// then matches the whole survey on the CPU, so no run mixes filter results of both backends.
 #include <vector>
 
 #include "minemap/opencl/opencl_backend.hpp"
@@ -36,16 +38,15 @@ std::optional<SliceFilterResult> filter_scan_opencl(const Scan& scan, const Slic
     }
     std::vector<cl_int> offsets(scan.slice_offsets.begin(), scan.slice_offsets.end());
     const std::vector<cl_int> kept(kept_indices.begin(), kept_indices.end());
-    auto& context = runtime->context();
     const std::size_t point_bytes = points.size() * sizeof(cl_float4);
-    cl::Buffer in(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, point_bytes, points.data());
-    cl::Buffer slice_offsets(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, offsets.size() * sizeof(cl_int),
-                             offsets.data());
-    cl::Buffer kept_slices(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, kept.size() * sizeof(cl_int),
-                           const_cast<cl_int*>(kept.data()));
-    cl::Buffer out(context, CL_MEM_WRITE_ONLY, point_bytes);
-    cl::Buffer counts(context, CL_MEM_WRITE_ONLY, kept.size() * sizeof(cl_int));
-    cl::Buffer replaced(context, CL_MEM_WRITE_ONLY, kept.size() * sizeof(cl_int));
+    cl::Buffer in = runtime->buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, point_bytes, points.data());
+    cl::Buffer slice_offsets =
+        runtime->buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, offsets.size() * sizeof(cl_int), offsets.data());
+    cl::Buffer kept_slices = runtime->buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, kept.size() * sizeof(cl_int),
+                                             const_cast<cl_int*>(kept.data()));
+    cl::Buffer out = runtime->buffer(CL_MEM_WRITE_ONLY, point_bytes);
+    cl::Buffer counts = runtime->buffer(CL_MEM_WRITE_ONLY, kept.size() * sizeof(cl_int));
+    cl::Buffer replaced = runtime->buffer(CL_MEM_WRITE_ONLY, kept.size() * sizeof(cl_int));
     int arg = 0;
     kernel.setArg(arg++, in);
     kernel.setArg(arg++, slice_offsets);
@@ -61,11 +62,12 @@ std::optional<SliceFilterResult> filter_scan_opencl(const Scan& scan, const Slic
     kernel.setArg(arg++, replaced);
     const std::size_t group = runtime->work_group_size(kernel, 64);
     auto& queue = runtime->queue();
-    queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(round_up(kept.size(), group)), cl::NDRange(group));
+    runtime->launch(kernel, round_up(kept.size(), group), group);
     std::vector<cl_float4> filtered(points.size());
     std::vector<cl_int> out_counts(kept.size()), out_replaced(kept.size());
-    queue.enqueueReadBuffer(out, CL_FALSE, 0, point_bytes, filtered.data());
-    queue.enqueueReadBuffer(counts, CL_FALSE, 0, out_counts.size() * sizeof(cl_int), out_counts.data());
+    // Blocking reads: each returns its own status (a failed non-blocking one might go unnoticed).
+    queue.enqueueReadBuffer(out, CL_TRUE, 0, point_bytes, filtered.data());
+    queue.enqueueReadBuffer(counts, CL_TRUE, 0, out_counts.size() * sizeof(cl_int), out_counts.data());
     queue.enqueueReadBuffer(replaced, CL_TRUE, 0, out_replaced.size() * sizeof(cl_int), out_replaced.data());
     result.slice_offsets.push_back(0);
     for (std::size_t k = 0; k < kept.size(); ++k) {
@@ -79,12 +81,9 @@ std::optional<SliceFilterResult> filter_scan_opencl(const Scan& scan, const Slic
       result.slice_offsets.push_back(static_cast<std::uint32_t>(result.points_cm.size()));
     }
     return result;
-  } catch (const cl::Error& e) {
-    if (why_not) *why_not = std::string("OpenCL slice filter: ") + e.what() + ": " + error_name(e.err());
-  } catch (const std::exception& e) {
-    if (why_not) *why_not = std::string("OpenCL slice filter: ") + e.what();
+  } catch (...) {
+    rethrow_as_device_error("OpenCL slice filter");
   }
-  return std::nullopt;
 }
 
 }  // namespace minemap::opencl

@@ -10,13 +10,16 @@
 
 namespace minemap::opencl {
 
-/// Creates the OpenCL pairing backend, or returns nullptr with the reason in `why_not`.
+/// Creates the OpenCL pairing backend, or returns nullptr with the reason in `why_not` (no platform,
+/// no device, kernel build failure, ...). Later device failures throw DeviceError (a BackendError).
 /// `allow_cpu_device`: accept a CPU OpenCL device (PoCL) when no GPU is found; `auto` mode passes
 /// false because TBB beats PoCL on the same cores.
 std::unique_ptr<PairingBackend> make_opencl_pairing_backend(bool allow_cpu_device, std::string* why_not);
 
 /// Runs the slice filter on the OpenCL device. Returns nullopt with the reason in `why_not` when
-/// no device is usable; errors during the run are reported the same way (the caller falls back).
+/// no device is usable (the caller uses the CPU). A device that fails during the run (allocation,
+/// launch, transfer) throws DeviceError, a BackendError: map_survey then matches the whole survey
+/// on the CPU. Faults and the injection hook MINEMAP_OPENCL_INJECT_FAULT: runtime.hpp.
 std::optional<SliceFilterResult> filter_scan_opencl(const Scan& scan, const SliceFilterSettings& settings,
                                                     bool allow_cpu_device, std::string* why_not);
 

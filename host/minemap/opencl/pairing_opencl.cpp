@@ -2,8 +2,8 @@
 // launches one search kernel per model (the union of neighbours keeps the closest pair across
 // launches) and one reduction kernel, then reads back 64 x 17 floats of partial sums, which the host
 // adds in double in group order (deterministic, no float atomics).
+#include <algorithm>
 #include <array>
-#include <cstdlib>
 #include <vector>
 
 #include "minemap/opencl/opencl_backend.hpp"
@@ -31,21 +31,20 @@ std::array<cl_float4, 3> rows_of(const Pose& pose) {
 }
 
 template <typename T>
-cl::Buffer upload(cl::Context& context, const std::vector<T>& host) {
+cl::Buffer upload(Runtime& runtime, const std::vector<T>& host) {
   // Zero-sized buffers are invalid in OpenCL: keep one dummy element for empty clouds.
   const std::size_t bytes = std::max<std::size_t>(1, host.size()) * sizeof(T);
   if (host.empty()) {
     std::vector<T> dummy(1);
-    return cl::Buffer(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, dummy.data());
+    return runtime.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, dummy.data());
   }
-  return cl::Buffer(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, const_cast<T*>(host.data()));
+  return runtime.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, const_cast<T*>(host.data()));
 }
 
 class OpenClPreparedCloud final : public PreparedCloud {
  public:
   OpenClPreparedCloud(Runtime& runtime, std::vector<Eigen::Vector3f> points, const KdTreeSettings& settings)
       : PreparedCloud(std::move(points), settings) {
-    auto& context = runtime.context();
     std::vector<cl_float4> data;
     data.reserve(this->points().size());
     for (const auto& p : this->points()) data.push_back(to_float4(p.x(), p.y(), p.z(), 0.0f));
@@ -53,14 +52,14 @@ class OpenClPreparedCloud final : public PreparedCloud {
     if (bytes_needed > runtime.max_alloc_bytes()) {
       throw DeviceError("cloud of " + std::to_string(data.size()) + " points exceeds the device's allocation limit");
     }
-    data_ = upload(context, data);
+    data_ = upload(runtime, data);
     const auto& t = tree();
-    nodes_ = upload(context, std::vector<KdNode>(t.nodes().begin(), t.nodes().end()));
-    tree_points_ = upload(context, std::vector<KdPoint>(t.points().begin(), t.points().end()));
-    leaf_means_ = upload(context, std::vector<std::array<float, 4>>(t.leaf_means().begin(), t.leaf_means().end()));
+    nodes_ = upload(runtime, std::vector<KdNode>(t.nodes().begin(), t.nodes().end()));
+    tree_points_ = upload(runtime, std::vector<KdPoint>(t.points().begin(), t.points().end()));
+    leaf_means_ = upload(runtime, std::vector<std::array<float, 4>>(t.leaf_means().begin(), t.leaf_means().end()));
     const std::size_t n = std::max<std::size_t>(1, data.size());
-    best_pair_ = cl::Buffer(context, CL_MEM_READ_WRITE, n * sizeof(cl_float4));
-    best_ref_ = cl::Buffer(context, CL_MEM_READ_WRITE, n * sizeof(cl_int2));
+    best_pair_ = runtime.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+    best_ref_ = runtime.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int2));
   }
 
   cl::Buffer data_, nodes_, tree_points_, leaf_means_, best_pair_, best_ref_;
@@ -69,10 +68,9 @@ class OpenClPreparedCloud final : public PreparedCloud {
 class OpenClPairingBackend final : public PairingBackend {
  public:
   explicit OpenClPairingBackend(std::shared_ptr<Runtime> runtime) : runtime_(std::move(runtime)) {
-    // Fault injection for tests of the CPU fallback: MINEMAP_OPENCL_INJECT_FAULT=N makes the N-th
-    // pairing call fail as an out-of-resources launch would.
-    if (const char* fault = std::getenv("MINEMAP_OPENCL_INJECT_FAULT")) inject_fault_at_ = std::atol(fault);
     try {
+      // MINEMAP_OPENCL_INJECT_FAULT (runtime.hpp) counts launches and allocations from here.
+      runtime_->rearm_fault_injection();
       nearest_in_tree_ = cl::Kernel(runtime_->program(), "nearest_in_tree");
       nearest_brute_force_ = cl::Kernel(runtime_->program(), "nearest_brute_force");
       pair_sums_ = cl::Kernel(runtime_->program(), "pair_sums");
@@ -80,7 +78,7 @@ class OpenClPairingBackend final : public PairingBackend {
       if (runtime_->work_group_size(nearest_brute_force_, kBruteTile) < kBruteTile) {
         throw DeviceError("device work-group limit is below the brute-force tile of " + std::to_string(kBruteTile));
       }
-      partials_ = cl::Buffer(runtime_->context(), CL_MEM_WRITE_ONLY, kReductionGroups * kSumTerms * sizeof(float));
+      partials_ = runtime_->buffer(CL_MEM_WRITE_ONLY, kReductionGroups * kSumTerms * sizeof(float));
     } catch (const DeviceError&) {
       throw;
     } catch (...) {
@@ -106,9 +104,6 @@ class OpenClPairingBackend final : public PairingBackend {
                         const PairingSettings& settings) override {
     PairSums total;
     total.reference_cm = data.centroid_cm();
-    if (inject_fault_at_ > 0 && ++pairing_calls_ == inject_fault_at_) {
-      throw DeviceError("clEnqueueNDRangeKernel: CL_OUT_OF_RESOURCES (injected by MINEMAP_OPENCL_INJECT_FAULT)");
-    }
     const auto& cloud = as_device(data);
     const auto n = static_cast<cl_int>(data.points().size());
     try {
@@ -124,9 +119,7 @@ class OpenClPairingBackend final : public PairingBackend {
       pair_sums_.setArg(arg++, reference);
       pair_sums_.setArg(arg++, partials_);
       pair_sums_.setArg(arg++, cl::Local(kSumTerms * reduction_group_size_ * sizeof(float)));
-      runtime_->queue().enqueueNDRangeKernel(pair_sums_, cl::NullRange,
-                                             cl::NDRange(kReductionGroups * reduction_group_size_),
-                                             cl::NDRange(reduction_group_size_));
+      runtime_->launch(pair_sums_, kReductionGroups * reduction_group_size_, reduction_group_size_);
       std::array<float, kReductionGroups * kSumTerms> partial{};
       runtime_->queue().enqueueReadBuffer(partials_, CL_TRUE, 0, sizeof(partial), partial.data());
       for (std::size_t g = 0; g < kReductionGroups; ++g) {
@@ -208,9 +201,7 @@ class OpenClPairingBackend final : public PairingBackend {
         kernel.setArg(arg++, first_model);
         kernel.setArg(arg++, cloud.best_pair_);
         kernel.setArg(arg++, cloud.best_ref_);
-        runtime_->queue().enqueueNDRangeKernel(kernel, cl::NullRange,
-                                               cl::NDRange(round_up(static_cast<std::size_t>(n), kBruteTile)),
-                                               cl::NDRange(kBruteTile));
+        runtime_->launch(kernel, round_up(static_cast<std::size_t>(n), kBruteTile), kBruteTile);
       } else {
         cl::Kernel& kernel = nearest_in_tree_;
         int arg = 0;
@@ -230,9 +221,7 @@ class OpenClPairingBackend final : public PairingBackend {
         kernel.setArg(arg++, cloud.best_pair_);
         kernel.setArg(arg++, cloud.best_ref_);
         const std::size_t group = runtime_->work_group_size(kernel, kSearchGroupSize);
-        runtime_->queue().enqueueNDRangeKernel(kernel, cl::NullRange,
-                                               cl::NDRange(round_up(static_cast<std::size_t>(n), group)),
-                                               cl::NDRange(group));
+        runtime_->launch(kernel, round_up(static_cast<std::size_t>(n), group), group);
       }
       first = false;
     }
@@ -240,8 +229,6 @@ class OpenClPairingBackend final : public PairingBackend {
   }
 
   std::shared_ptr<Runtime> runtime_;
-  long inject_fault_at_ = 0;
-  long pairing_calls_ = 0;
   cl::Kernel nearest_in_tree_, nearest_brute_force_, pair_sums_;
   std::size_t reduction_group_size_ = kReductionGroupSize;
   cl::Buffer partials_;

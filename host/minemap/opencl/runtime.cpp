@@ -22,6 +22,29 @@ std::string kernel_source() {
   return source;
 }
 
+/// What MINEMAP_OPENCL_INJECT_FAULT=build appends: a declaration no OpenCL C compiler accepts.
+constexpr const char* kInjectedBuildFault =
+    "\n// MINEMAP_OPENCL_INJECT_FAULT=build\n__kernel void minemap_injected_build_fault(void) { not_opencl_c; }\n";
+
+/// A build log cut to its first lines: the first error is what matters, and a log of warnings
+/// must not bury the rest of the output.
+std::string shortened_log(const std::string& log) {
+  constexpr std::size_t kMaxLines = 30;
+  std::istringstream in(log);
+  std::string line, out;
+  std::size_t lines = 0, dropped = 0;
+  while (std::getline(in, line)) {
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    if (lines++ < kMaxLines) {
+      out += "\n  " + line;
+    } else {
+      ++dropped;
+    }
+  }
+  if (dropped > 0) out += "\n  ... (" + std::to_string(dropped) + " more lines)";
+  return out;
+}
+
 struct Candidate {
   cl::Device device;
   std::string label;  // "platform / device"
@@ -66,8 +89,12 @@ Candidate pick_device(std::string* why_not) {
   try {
     candidates = list_devices();
   } catch (const cl::Error& e) {
-    *why_not = std::string("no OpenCL platform found (") + e.what() + ": " + error_name(e.err()) +
-               "); install an ICD such as pocl-opencl-icd or a GPU driver";
+    if (e.err() == CL_PLATFORM_NOT_FOUND_KHR) {
+      *why_not = std::string("no OpenCL platform found (") + e.what() + ": " + error_name(e.err()) +
+                 "); install an ICD such as pocl-opencl-icd or a GPU driver";
+    } else {
+      *why_not = std::string("listing the OpenCL devices failed (") + e.what() + ": " + error_name(e.err()) + ")";
+    }
     return {};
   }
   if (candidates.empty()) {
@@ -113,8 +140,8 @@ void rethrow_as_device_error(const std::string& what) {
     throw;
   } catch (const cl::BuildError& e) {
     std::ostringstream text;
-    text << what << ": kernel build failed (" << error_name(e.err()) << ")";
-    for (const auto& [device, log] : e.getBuildLog()) text << "\n--- build log ---\n" << log;
+    text << what << ": kernel build failed (" << e.what() << ": " << error_name(e.err()) << "); build log:";
+    for (const auto& [device, log] : e.getBuildLog()) text << shortened_log(log);
     throw DeviceError(text.str());
   } catch (const cl::Error& e) {
     throw DeviceError(what + ": " + e.what() + ": " + error_name(e.err()));
@@ -134,11 +161,67 @@ Runtime::Runtime(cl::Device device, bool is_gpu) : device_(std::move(device)), i
     if (device_.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>() & CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT) {
       options += " -cl-fp32-correctly-rounded-divide-sqrt";
     }
-    program_ = cl::Program(context_, kernel_source());
+    const InjectedFault fault = InjectedFault::from_environment();
+    fault_kind_ = fault.kind;
+    fault_at_ = fault.at;
+    const bool broken = fault.kind == InjectedFault::Kind::kBuild;
+    program_ = cl::Program(context_, kernel_source() + (broken ? kInjectedBuildFault : ""));
     program_.build({device_}, options.c_str());
   } catch (...) {
     rethrow_as_device_error("OpenCL setup on " + (description_.empty() ? std::string("device") : description_));
   }
+}
+
+InjectedFault InjectedFault::parse(const char* text) {
+  InjectedFault fault;
+  if (text == nullptr || *text == '\0') return fault;
+  const std::string value = lower(text);
+  std::string count = value;
+  if (value == "build") {
+    fault.kind = Kind::kBuild;
+    return fault;
+  }
+  if (value.rfind("launch:", 0) == 0) {
+    fault.kind = Kind::kLaunch;
+    count = value.substr(7);
+  } else if (value.rfind("alloc:", 0) == 0) {
+    fault.kind = Kind::kAlloc;
+    count = value.substr(6);
+  } else {
+    fault.kind = Kind::kLaunch;  // a plain number: the launch fault, as first defined
+  }
+  const bool digits = !count.empty() && count.size() <= 9 &&
+                      std::all_of(count.begin(), count.end(), [](unsigned char c) { return std::isdigit(c) != 0; });
+  fault.at = digits ? std::stol(count) : 0;
+  if (fault.at < 1) {
+    throw DeviceError(std::string("MINEMAP_OPENCL_INJECT_FAULT='") + text +
+                      "' is not understood (expected build, launch:N, alloc:N or N, with N >= 1)");
+  }
+  return fault;
+}
+
+InjectedFault InjectedFault::from_environment() { return parse(std::getenv("MINEMAP_OPENCL_INJECT_FAULT")); }
+
+void Runtime::rearm_fault_injection() {
+  const InjectedFault fault = InjectedFault::from_environment();
+  fault_kind_ = fault.kind;
+  fault_at_ = fault.at;
+  launches_ = 0;
+  allocations_ = 0;
+}
+
+cl::Buffer Runtime::buffer(cl_mem_flags flags, std::size_t bytes, void* host) {
+  if (fault_kind_ == InjectedFault::Kind::kAlloc && ++allocations_ == fault_at_) {
+    throw cl::Error(CL_MEM_OBJECT_ALLOCATION_FAILURE, "clCreateBuffer (injected by MINEMAP_OPENCL_INJECT_FAULT)");
+  }
+  return cl::Buffer(context_, flags, bytes, host);
+}
+
+void Runtime::launch(const cl::Kernel& kernel, std::size_t global, std::size_t local) {
+  if (fault_kind_ == InjectedFault::Kind::kLaunch && ++launches_ == fault_at_) {
+    throw cl::Error(CL_OUT_OF_RESOURCES, "clEnqueueNDRangeKernel (injected by MINEMAP_OPENCL_INJECT_FAULT)");
+  }
+  queue_.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(global), cl::NDRange(local));
 }
 
 std::shared_ptr<Runtime> Runtime::get(bool allow_cpu_device, std::string* why_not) {

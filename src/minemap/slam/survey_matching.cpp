@@ -43,7 +43,7 @@ class SurveyMatcher {
       unstructured_noted_ = false;
       backend_ = make_cpu_pairing_backend();
       result_.backend = backend_->name() + ": " + backend_->device_description();
-      result_.backend_note = warning;
+      result_.backend_note = "CPU backend (TBB), after the OpenCL failure in the note";  // printed once, as the note
       result_.notes.push_back(warning);
       prepare_all();
       match_all();
