@@ -1,5 +1,5 @@
-// Shared by all minemap kernels. OpenCL C 1.2, float only (no double anywhere, literals included),
-// no atomics on floats. Contraction is off so that a*b + c rounds exactly as the C++ reference
+// Shared by all minemap kernels. OpenCL C 1.2, float only (no double literals either), except the
+// ICP sums of pair_sums_blocks, built only where the device has cl_khr_fp64; no atomics on floats. Contraction is off so that a*b + c rounds exactly as the C++ reference
 // (built without FMA contraction) does: CPU and device then agree bit for bit on distances.
 #pragma OPENCL FP_CONTRACT OFF
 

@@ -230,3 +230,41 @@ __kernel void pair_sums(__global const float4* data, __global const float4* best
     for (int t = 0; t < MM_SUM_TERMS; ++t) partials[get_group_id(0) * MM_SUM_TERMS + t] = scratch[t * wg];
   }
 }
+
+#ifdef MM_HAVE_FP64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+
+// The ICP sums exactly as the CPU backend makes them (PairSums::add_pair in
+// src/minemap/search/pairing.cpp): work-item b sums the pairs of data points [b * block_size,
+// (b + 1) * block_size) in double, in index order, term by term in the same operations, and writes
+// one record of 17 doubles; the host adds the records in block order as the CPU adds its blocks.
+// The CPU and this kernel then produce the same bits, and so the same poses. Built only where the
+// device has cl_khr_fp64 (the host passes -DMM_HAVE_FP64); elsewhere pair_sums (float) is used.
+__kernel void pair_sums_blocks(__global const float4* data, __global const float4* best_pair, const int data_count,
+                               const int block_size, const double reference_x, const double reference_y,
+                               const double reference_z, __global double* partials) {
+  const int b = get_global_id(0);
+  const int begin = b * block_size;
+  if (begin >= data_count) return;
+  const int end = min(data_count, begin + block_size);
+  double acc[MM_SUM_TERMS];
+  for (int t = 0; t < MM_SUM_TERMS; ++t) acc[t] = 0.0;
+  for (int i = begin; i < end; ++i) {
+    const float4 pair = best_pair[i];
+    if (pair.w < 0.0f) continue;
+    const float4 point = data[i];
+    const double pc[3] = {(double)point.x - reference_x, (double)point.y - reference_y, (double)point.z - reference_z};
+    const double mc[3] = {(double)pair.x - reference_x, (double)pair.y - reference_y, (double)pair.z - reference_z};
+    acc[0] += 1.0;
+    for (int r = 0; r < 3; ++r) {
+      acc[1 + r] += pc[r];
+      acc[4 + r] += mc[r];
+    }
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) acc[7 + 3 * r + c] += pc[r] * mc[c];
+    }
+    acc[16] += (double)pair.w;
+  }
+  for (int t = 0; t < MM_SUM_TERMS; ++t) partials[b * MM_SUM_TERMS + t] = acc[t];
+}
+#endif

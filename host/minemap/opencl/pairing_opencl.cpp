@@ -1,7 +1,9 @@
 // The OpenCL pairing backend: trees and clouds are uploaded once when prepared; each ICP iteration
 // launches one search kernel per model (the union of neighbours keeps the closest pair across
-// launches) and one reduction kernel, then reads back 64 x 17 floats of partial sums, which the host
-// adds in double in group order (deterministic, no float atomics).
+// launches) and one reduction kernel. With double precision on the device, pair_sums_blocks makes
+// the CPU backend's per-block sums bit for bit and the host adds them in block order (same poses as
+// the CPU); without it, pair_sums reduces in float to 64 x 17 partial sums, added by the host in
+// double in group order. Deterministic either way, no atomics.
 #include <algorithm>
 #include <array>
 #include <vector>
@@ -74,6 +76,7 @@ class OpenClPairingBackend final : public PairingBackend {
       nearest_in_tree_ = cl::Kernel(runtime_->program(), "nearest_in_tree");
       nearest_brute_force_ = cl::Kernel(runtime_->program(), "nearest_brute_force");
       pair_sums_ = cl::Kernel(runtime_->program(), "pair_sums");
+      if (runtime_->has_fp64()) pair_sums_blocks_ = cl::Kernel(runtime_->program(), "pair_sums_blocks");
       reduction_group_size_ = runtime_->work_group_size(pair_sums_, kReductionGroupSize);
       if (runtime_->work_group_size(nearest_brute_force_, kBruteTile) < kBruteTile) {
         throw DeviceError("device work-group limit is below the brute-force tile of " + std::to_string(kBruteTile));
@@ -108,6 +111,7 @@ class OpenClPairingBackend final : public PairingBackend {
     const auto n = static_cast<cl_int>(data.points().size());
     try {
       if (n == 0 || !search(cloud, n, models, method, settings)) return total;
+      if (runtime_->has_fp64()) return sums_by_block(cloud, n, data.centroid_cm());
       // The centroid is float-representable (PreparedCloud rounds it), so the device subtracts
       // exactly the reference the host adds back in t = (c_m + r) - R (c_p + r).
       const Eigen::Vector3f r = data.centroid_cm().cast<float>();
@@ -137,6 +141,33 @@ class OpenClPairingBackend final : public PairingBackend {
     } catch (...) {
       rethrow_as_device_error("OpenCL pairing");
     }
+    return total;
+  }
+
+  /// The sums as the CPU makes them (kernel pair_sums_blocks): bit-identical to the CPU backend.
+  /// Reads back 17 doubles per block of kPairSumBlock data points (about 2 % of the pairs' bytes).
+  PairSums sums_by_block(const OpenClPreparedCloud& cloud, cl_int n, const Eigen::Vector3d& reference) {
+    const std::size_t blocks = (static_cast<std::size_t>(n) + kPairSumBlock - 1) / kPairSumBlock;
+    if (block_partials_count_ < blocks) {
+      block_partials_ = runtime_->buffer(CL_MEM_WRITE_ONLY, blocks * kSumTerms * sizeof(double));
+      block_partials_count_ = blocks;
+    }
+    int arg = 0;
+    pair_sums_blocks_.setArg(arg++, cloud.data_);
+    pair_sums_blocks_.setArg(arg++, cloud.best_pair_);
+    pair_sums_blocks_.setArg(arg++, n);
+    pair_sums_blocks_.setArg(arg++, static_cast<cl_int>(kPairSumBlock));
+    pair_sums_blocks_.setArg(arg++, reference.x());
+    pair_sums_blocks_.setArg(arg++, reference.y());
+    pair_sums_blocks_.setArg(arg++, reference.z());
+    pair_sums_blocks_.setArg(arg++, block_partials_);
+    const std::size_t group = std::min<std::size_t>(64, runtime_->work_group_size(pair_sums_blocks_, 64));
+    runtime_->launch(pair_sums_blocks_, (blocks + group - 1) / group * group, group);
+    std::vector<double> partial(blocks * kSumTerms);
+    runtime_->queue().enqueueReadBuffer(block_partials_, CL_TRUE, 0, partial.size() * sizeof(double), partial.data());
+    PairSums total;
+    total.reference_cm = reference;
+    for (std::size_t b = 0; b < blocks; ++b) total += PairSums::from_terms(partial.data() + b * kSumTerms, reference);
     return total;
   }
 
@@ -232,6 +263,9 @@ class OpenClPairingBackend final : public PairingBackend {
   cl::Kernel nearest_in_tree_, nearest_brute_force_, pair_sums_;
   std::size_t reduction_group_size_ = kReductionGroupSize;
   cl::Buffer partials_;
+  cl::Kernel pair_sums_blocks_;  ///< only on devices with cl_khr_fp64
+  cl::Buffer block_partials_;
+  std::size_t block_partials_count_ = 0;
 };
 
 }  // namespace

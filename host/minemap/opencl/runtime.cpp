@@ -161,6 +161,13 @@ Runtime::Runtime(cl::Device device, bool is_gpu) : device_(std::move(device)), i
     if (device_.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>() & CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT) {
       options += " -cl-fp32-correctly-rounded-divide-sqrt";
     }
+    has_fp64_ = device_.getInfo<CL_DEVICE_EXTENSIONS>().find("cl_khr_fp64") != std::string::npos;
+    // MINEMAP_OPENCL_FP64=off takes the float-sum path a device without double precision takes
+    // (tests run it on PoCL, whose device has double precision).
+    if (const char* fp64 = std::getenv("MINEMAP_OPENCL_FP64"); fp64 != nullptr && std::string(fp64) == "off") {
+      has_fp64_ = false;
+    }
+    if (has_fp64_) options += " -DMM_HAVE_FP64=1";
     const InjectedFault fault = InjectedFault::from_environment();
     fault_kind_ = fault.kind;
     fault_at_ = fault.at;

@@ -74,6 +74,9 @@ class Runtime {
   /// Largest power of two <= min(wanted, the kernel's and the device's work-group limits).
   std::size_t work_group_size(const cl::Kernel& kernel, std::size_t wanted) const;
   std::size_t max_alloc_bytes() const { return max_alloc_bytes_; }
+  /// The device does double precision (cl_khr_fp64): the ICP sums are then made exactly as the CPU
+  /// backend makes them (kernel pair_sums_blocks), and both backends give the same bits.
+  bool has_fp64() const { return has_fp64_; }
 
   /// clCreateBuffer; every device buffer is made here, so an injected allocation fault takes the
   /// path of a real one (cl::Error with CL_MEM_OBJECT_ALLOCATION_FAILURE).
@@ -93,6 +96,7 @@ class Runtime {
   std::string description_;
   bool is_gpu_ = false;
   std::size_t max_alloc_bytes_ = 0;
+  bool has_fp64_ = false;
   std::atomic<InjectedFault::Kind> fault_kind_{InjectedFault::Kind::kNone};
   std::atomic<long> fault_at_{0};
   std::atomic<long> launches_{0};

@@ -51,6 +51,35 @@ PairSums& PairSums::operator+=(const PairSums& other) {
   return *this;
 }
 
+void PairSums::add_pair(const Eigen::Vector3f& p, const Eigen::Vector3f& m, float squared_distance_cm2) {
+  const double pc[3] = {static_cast<double>(p.x()) - reference_cm.x(), static_cast<double>(p.y()) - reference_cm.y(),
+                        static_cast<double>(p.z()) - reference_cm.z()};
+  const double mc[3] = {static_cast<double>(m.x()) - reference_cm.x(), static_cast<double>(m.y()) - reference_cm.y(),
+                        static_cast<double>(m.z()) - reference_cm.z()};
+  count += 1.0;
+  for (int r = 0; r < 3; ++r) {
+    sum_data[r] += pc[r];
+    sum_model[r] += mc[r];
+  }
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) sum_data_model(r, c) += pc[r] * mc[c];
+  }
+  sum_squared_distance_cm2 += static_cast<double>(squared_distance_cm2);
+}
+
+PairSums PairSums::from_terms(const double* t, const Eigen::Vector3d& reference_cm) {
+  PairSums sums;
+  sums.reference_cm = reference_cm;
+  sums.count = t[0];
+  sums.sum_data = Eigen::Vector3d(t[1], t[2], t[3]);
+  sums.sum_model = Eigen::Vector3d(t[4], t[5], t[6]);
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) sums.sum_data_model(r, c) = t[7 + 3 * r + c];
+  }
+  sums.sum_squared_distance_cm2 = t[16];
+  return sums;
+}
+
 PreparedCloud::PreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& tree_settings)
     : points_(std::move(points)), tree_(points_, tree_settings) {
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();

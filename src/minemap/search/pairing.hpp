@@ -55,7 +55,18 @@ struct PairSums {
 
   double rms_cm() const;
   PairSums& operator+=(const PairSums& other);  ///< both must share reference_cm
+  /// Adds one pair, centred: p' = p - reference_cm, m' = m - reference_cm. Written out term by
+  /// term: kernels/correspondence.cl (pair_sums_blocks) repeats these operations in this order.
+  void add_pair(const Eigen::Vector3f& p, const Eigen::Vector3f& m, float squared_distance_cm2);
+  /// The 17 terms in kernel order: count, sum p', sum m', sum p' m'^T (row-major), sum |p - m|^2.
+  static PairSums from_terms(const double* terms, const Eigen::Vector3d& reference_cm);
 };
+
+/// Pairs are summed per block of this many consecutive data points, in double and in index order,
+/// and the blocks are added in order: the CPU backend does so (TBB over blocks, so any thread count
+/// gives the same bits), and the OpenCL backend does the same per work-item on devices with double
+/// precision, so the two backends' sums, and hence their poses, are bit-identical.
+inline constexpr int kPairSumBlock = 64;
 
 /// The closest model point of one query, for tests and overlap counting.
 struct NearestPair {

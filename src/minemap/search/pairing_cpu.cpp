@@ -11,7 +11,7 @@
 namespace minemap {
 namespace {
 
-constexpr std::size_t kQueriesPerBlock = 1024;
+constexpr auto kQueriesPerBlock = static_cast<std::size_t>(kPairSumBlock);
 
 class CpuPreparedCloud final : public PreparedCloud {
  public:
@@ -96,20 +96,16 @@ class CpuPairingBackend final : public PairingBackend {
     const std::size_t blocks = (points.size() + kQueriesPerBlock - 1) / kQueriesPerBlock;
     std::vector<PairSums> partial(blocks);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const tbb::blocked_range<std::size_t>& range) {
+      // Hints never change a result (detail::exact_nearest), so they may carry across blocks.
+      std::vector<std::int32_t> hints(placed.size(), -1);
       for (std::size_t b = range.begin(); b != range.end(); ++b) {
         PairSums sums;
-        std::vector<std::int32_t> hints(placed.size(), -1);
+        sums.reference_cm = reference;
         const std::size_t end = std::min(points.size(), (b + 1) * kQueriesPerBlock);
         for (std::size_t i = b * kQueriesPerBlock; i < end; ++i) {
           const NearestPair pair = find_nearest(points[i], placed, method, max_squared, hints.data());
           if (pair.squared_distance_cm2 < 0.0f) continue;
-          const Eigen::Vector3d p = points[i].cast<double>() - reference;
-          const Eigen::Vector3d m = pair.position_cm.cast<double>() - reference;
-          sums.count += 1.0;
-          sums.sum_data += p;
-          sums.sum_model += m;
-          sums.sum_data_model.noalias() += p * m.transpose();
-          sums.sum_squared_distance_cm2 += pair.squared_distance_cm2;
+          sums.add_pair(points[i], pair.position_cm, pair.squared_distance_cm2);
         }
         partial[b] = sums;
       }
