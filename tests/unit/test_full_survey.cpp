@@ -1,0 +1,36 @@
+// The accuracy goal on the whole default survey (64 scans, 250 m), not just its start:
+// simultaneous matching within 0.2 % of the distance driven. About a minute on 2 cores, so it
+// carries the CTest label "long" (scripts/sanitize.sh leaves such tests out of sanitizer runs).
+#include <gtest/gtest.h>
+
+#include <cstdio>
+
+#include "minemap/sim/mine_simulator.hpp"
+#include "minemap/slam/survey_matching.hpp"
+
+namespace minemap {
+namespace {
+
+TEST(MappingFullSurvey, DefaultSurveyIsWithinTwoPerMilleOfTheDrive) {
+  const auto survey = sim::simulate_mine_survey(sim::SimulationSettings{});  // seed 1 = `minemap simulate`
+  ASSERT_EQ(survey.scans.size(), 64u);
+  MappingSettings settings;  // the defaults of `minemap map`
+  settings.backend = Backend::kCpu;
+  const auto result = map_survey(survey.scans, settings);
+  ASSERT_TRUE(result.all_registered());
+  std::vector<Pose> poses, odometry;
+  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+    poses.push_back(result.scans[i].pose_cm);
+    odometry.push_back(survey.scans[i].pose_cm);
+  }
+  const auto registered = pose_errors(poses, survey.truth_cm);
+  const auto drifted = pose_errors(odometry, survey.truth_cm);
+  std::printf("full survey: odometry %.1f cm, simultaneous %.1f cm mean error over %.1f m (%.3f %%), %d relaxation matches\n",
+              drifted.mean_translation_cm, registered.mean_translation_cm, registered.path_length_cm / 100.0,
+              100.0 * registered.mean_translation_cm / registered.path_length_cm, result.relaxation_matches);
+  EXPECT_LE(registered.mean_translation_cm, 0.002 * registered.path_length_cm);
+  EXPECT_LT(registered.mean_translation_cm, 0.1 * drifted.mean_translation_cm);
+}
+
+}  // namespace
+}  // namespace minemap
