@@ -1,0 +1,141 @@
+#!/usr/bin/env bash
+# Runs the CTest suite (unit tests, the OpenCL ones on PoCL, CLI tests, fuzz corpus replays, the
+# install test) under sanitizers, one build folder per sanitizer, clang, RelWithDebInfo (-O2 -g),
+# library + CLI + tests only (no benchmarks, no libFuzzer targets):
+#   address  build-asan  -fsanitize=address,undefined, LeakSanitizer on, UBSan halts on error
+#   thread   build-tsan  -fsanitize=thread, against a TSan-instrumented oneTBB (see below)
+# Every sanitizer report from any process (the minemap CLI run by the tests included) goes to a
+# file under <build>/sanitizer-reports/; the run fails if one exists, even when the test that caused
+# it passed, and prints it.
+#
+# usage: scripts/sanitize.sh [address|thread|all] [extra ctest arguments...]   (default: all)
+# environment: SANITIZE_CXX (clang++), SANITIZE_JOBS (nproc), SANITIZE_TIMEOUT (per test, 900 s),
+#              SANITIZE_TBB_SOURCE (a oneTBB source tree to use instead of `apt-get source onetbb`)
+#
+# Not run here (ctest -LE long -E ...): two accuracy checks on long drives, whose code the smaller
+# surveys run too: label "long" (MappingFullSurvey, the whole 64-scan survey: 83 s in Release, over
+# 3 min under ASan) and MappingSimulatedMine.SimultaneousMatchingIsAccurateAndBeatsPairwise (24
+# scans: 3 s in Release, 3-4 min under each sanitizer). Simultaneous matching, the default mode, runs
+# here in MappingDeterminism.* (5 scans, 1 and 2 threads), Determinism.*, Cli.* and BadInput.*.
+# Every other test runs under both sanitizers.
+#
+# What is not instrumented, and why (tests/sanitizers/ holds each file, one reason per entry):
+# * clang, not gcc: gcc 12 takes over 2 minutes per test file with -fsanitize=address,undefined.
+# * UBSan skips Eigen's headers (ubsan-ignorelist.txt): its checks keep the tiny Eigen accessors
+#   from inlining and the ICP tests ran ~150x slower than Release. ASan still checks every access,
+#   Eigen's included; minemap's own code keeps every UBSan check.
+# * LeakSanitizer ignores what libpocl allocates (lsan.supp): PoCL 3.1 keeps its LLVM compiler
+#   state until the process dies. The OpenCL tests run (on PoCL) and fail without a platform.
+# * TSan: Debian's libtbb is not instrumented, and TBB hands tasks to its workers through its own
+#   atomics, which TSan cannot see, so every parallel_for body "races" with the code around it
+#   (hundreds of false reports per test). oneTBB's own ITT hooks are commented out on those paths,
+#   and a suppression would hide minemap's code in the loop bodies too. So the thread build links a
+#   libtbb built here with TBB_SANITIZE=thread from Debian's own onetbb source package (the version
+#   installed, `apt-get source` with a private apt state, ~30 s to build, kept in
+#   build-tsan/onetbb/). PoCL is not instrumented either: TSan sees its pthread mutexes and
+#   condition variables, and no suppression was needed.
+set -euo pipefail
+repo_root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$repo_root"
+
+which="${1:-all}"
+[ $# -gt 0 ] && shift
+case "$which" in
+  address) sanitizers=(address) ;;
+  thread) sanitizers=(thread) ;;
+  all) sanitizers=(address thread) ;;
+  -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d'; exit 0 ;;
+  *) echo "usage: $0 [address|thread|all] [ctest arguments...]" >&2; exit 2 ;;
+esac
+cxx="${SANITIZE_CXX:-clang++}"
+cc="${cxx/clang++/clang}"; cc="${cc/g++/gcc}"
+jobs="${SANITIZE_JOBS:-$(nproc)}"
+timeout="${SANITIZE_TIMEOUT:-900}"
+supp="$repo_root/tests/sanitizers"
+heavy='^MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise$'
+
+# Builds oneTBB with -fsanitize=thread into $1/install once; prints its TBB_DIR.
+tsan_tbb() {
+  local dir="$1" prefix="$1/install"
+  if [ -f "$prefix/lib/cmake/TBB/TBBConfig.cmake" ]; then echo "$prefix/lib/cmake/TBB"; return; fi
+  rm -rf "$dir"; mkdir -p "$dir"
+  local source="${SANITIZE_TBB_SOURCE:-}"
+  if [ -z "$source" ]; then
+    # A private apt state with deb-src entries: the system's apt configuration is left alone.
+    local apt="$dir/apt" codename
+    codename="$(. /etc/os-release && echo "${VERSION_CODENAME:-bookworm}")"
+    mkdir -p "$apt/sources" "$apt/lists/partial" "$apt/cache/archives/partial"
+    printf 'Types: deb-src\nURIs: http://deb.debian.org/debian\nSuites: %s %s-updates\nComponents: main\nSigned-By: /usr/share/keyrings/debian-archive-keyring.gpg\n\nTypes: deb-src\nURIs: http://deb.debian.org/debian-security\nSuites: %s-security\nComponents: main\nSigned-By: /usr/share/keyrings/debian-archive-keyring.gpg\n' \
+      "$codename" "$codename" "$codename" > "$apt/sources/debian-src.sources"
+    local opts=(-q -o Dir::Etc::SourceList=/dev/null -o Dir::Etc::SourceParts="$apt/sources"
+                -o Dir::State::Lists="$apt/lists" -o Dir::Cache="$apt/cache")
+    apt-get "${opts[@]}" update > "$dir/apt.log" 2>&1 || { cat "$dir/apt.log" >&2; return 1; }
+    local version
+    version="$(dpkg-query -W -f='${source:Version}' libtbb-dev 2>/dev/null || true)"
+    (cd "$dir" && { apt-get "${opts[@]}" source --download-only "onetbb${version:+=$version}" ||
+                    apt-get "${opts[@]}" source --download-only onetbb; } >> "$dir/apt.log" 2>&1) ||
+      { cat "$dir/apt.log" >&2; return 1; }
+    (cd "$dir" && dpkg-source -x ./onetbb_*.dsc src >> "$dir/apt.log" 2>&1) || { cat "$dir/apt.log" >&2; return 1; }
+    source="$dir/src"
+  fi
+  cmake -S "$source" -B "$dir/build" -DCMAKE_CXX_COMPILER="$cxx" -DCMAKE_C_COMPILER="$cc" \
+    -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTBB_SANITIZE=thread -DTBB_TEST=OFF -DTBB_EXAMPLES=OFF \
+    -DTBB_STRICT=OFF -DTBBMALLOC_BUILD=OFF -DTBB_DISABLE_HWLOC_AUTOMATIC_SEARCH=ON -DTBB_ENABLE_IPO=OFF \
+    -DCMAKE_INSTALL_PREFIX="$prefix" > "$dir/build.log" 2>&1 &&
+  cmake --build "$dir/build" -j "$jobs" >> "$dir/build.log" 2>&1 &&
+  cmake --install "$dir/build" >> "$dir/build.log" 2>&1 || { tail -n 40 "$dir/build.log" >&2; return 1; }
+  echo "$prefix/lib/cmake/TBB"
+}
+
+run_one() {
+  local sanitizer="$1"; shift
+  local build_dir flags cxx_flags="" tbb_args=()
+  local start=$SECONDS
+  case "$sanitizer" in
+    address) build_dir=build-asan; flags=address,undefined
+             cxx_flags="-fsanitize-ignorelist=$supp/ubsan-ignorelist.txt" ;;
+    thread)  build_dir=build-tsan; flags=thread
+             echo "== $build_dir: oneTBB with -fsanitize=thread"
+             local tbb_dir; tbb_dir="$(tsan_tbb "$repo_root/$build_dir/onetbb")" || return 1
+             tbb_args=(-DTBB_DIR="$tbb_dir") ;;
+  esac
+  echo "== $build_dir: $cxx -fsanitize=$flags"
+  mkdir -p "$build_dir"
+  cmake -S . -B "$build_dir" -DCMAKE_CXX_COMPILER="$cxx" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    -DMINEMAP_SANITIZE="$flags" -DCMAKE_CXX_FLAGS="$cxx_flags" "${tbb_args[@]}" \
+    -DMINEMAP_BUILD_TESTS=ON -DMINEMAP_BUILD_BENCH=OFF -DMINEMAP_BUILD_FUZZ=OFF > "$build_dir/configure.log" 2>&1 ||
+    { cat "$build_dir/configure.log" >&2; return 1; }
+  cmake --build "$build_dir" -j "$jobs"
+  local built=$SECONDS
+
+  local reports="$repo_root/$build_dir/sanitizer-reports"
+  rm -rf "$reports"; mkdir -p "$reports"
+  local status=0
+  (
+    cd "$build_dir"
+    if [ "$sanitizer" = address ]; then
+      # detect_stack_use_after_return: references to dead locals (costs ~25 %). With ASan and UBSan
+      # in one runtime the last log_path wins, so both name the same files.
+      export ASAN_OPTIONS="detect_leaks=1:detect_stack_use_after_return=1:check_initialization_order=1:strict_init_order=1:log_path=$reports/asan-ubsan"
+      export LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0"
+      export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1:log_path=$reports/asan-ubsan"
+    else
+      export TSAN_OPTIONS="halt_on_error=0:second_deadlock_stack=1:log_path=$reports/tsan"
+    fi
+    ctest --output-on-failure -j"$jobs" --timeout "$timeout" -E "$heavy" -LE long "$@"
+  ) || status=$?
+  local found=()
+  for report in "$reports"/*; do [ -e "$report" ] && found+=("$report"); done
+  if [ ${#found[@]} -gt 0 ]; then
+    for report in "${found[@]}"; do echo "--- $report" >&2; cat "$report" >&2; done
+    echo "!! $build_dir: ${#found[@]} process(es) wrote sanitizer reports (above)" >&2
+    status=1
+  fi
+  echo "== $build_dir: build $((built - start)) s, tests $((SECONDS - built)) s: $([ $status -eq 0 ] && echo passed || echo FAILED)"
+  return $status
+}
+
+failed=()
+for s in "${sanitizers[@]}"; do run_one "$s" "$@" || failed+=("$s"); done
+if [ ${#failed[@]} -gt 0 ]; then echo "sanitize.sh: FAILED: ${failed[*]}" >&2; exit 1; fi
+echo "sanitize.sh: ${sanitizers[*]}: every test passed, no sanitizer report"
