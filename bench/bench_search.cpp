@@ -182,6 +182,29 @@ void BM_NearestNeighbour_minemap_queries_only(benchmark::State& state, std::stri
 BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap_queries_only, lidar, "lidar")->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap_queries_only, mine, "mine")->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// ---- Readers: the real mine clouds (binary_compressed PCD) and a paper-size uos text scan ----
+void BM_ReadPcdCompressed(benchmark::State& state) {
+  const auto path = shared_data() / "mine_jinchuan_pcr" / "2025-04-21-11-04-46.pcd";
+  for (auto _ : state) {
+    const Scan scan = io::read_pcd(path);
+    benchmark::DoNotOptimize(scan.points_cm.data());
+    state.SetItemsProcessed(state.items_processed() + static_cast<std::int64_t>(scan.size()));
+  }
+}
+BENCHMARK(BM_ReadPcdCompressed)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_ReadUosText(benchmark::State& state) {
+  const auto path = std::filesystem::temp_directory_path() / "minemap-bench-scan000.3d";
+  io::write_uos_points(path, simulated_pair().model);
+  for (auto _ : state) {
+    const Scan scan = io::read_uos_points(path);
+    benchmark::DoNotOptimize(scan.points_cm.data());
+    state.SetItemsProcessed(state.items_processed() + static_cast<std::int64_t>(scan.size()));
+  }
+  std::filesystem::remove(path);
+}
+BENCHMARK(BM_ReadUosText)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // ---- Fig. 5: registration time of two scans against bucket size ----
 
 void BM_RegistrationBucketSize(benchmark::State& state, SearchMethod method) {
