@@ -7,6 +7,9 @@
 //   BM_Table1_Pair/<data>/<backend>/all_apx     all points, approximate kd-tree then exact
 //   BM_Table1_Pair/<data>/<backend>/reduced_apx reduced points (slice filter, or every 4th point for
 //                                               scans without slices), approximate then exact
+//   BM_Table1_Pair/<data>/<backend>/*_accelerated  the same with Anderson-accelerated ICP
+//                                               (IcpSettings::accelerate; not in the paper):
+//                                               all_kd, reduced_kd (exact only) and reduced_apx
 //   BM_Table1_Slam/<backend>/<scans>            simultaneous matching of the simulated survey, the
 //                                               paper's setting (models reduced like the data)
 //   BM_Table1_Slam/cpu_dense_models/<scans>     the same with minemap's default, denser models
@@ -63,17 +66,27 @@ const PairInput& pair_input(const std::string& data) {
   return data == "mine" ? mine : lidar;
 }
 
-enum class Row { kAllBrute, kAllKd, kAllApx, kReducedApx };
+enum class Row {
+  kAllBrute,
+  kAllKd,
+  kAllApx,
+  kReducedApx,
+  kAllKdAccelerated,
+  kReducedKdAccelerated,
+  kReducedApxAccelerated,
+};
 
 void BM_Table1_Pair(benchmark::State& state, std::string data, Backend backend, Row row) {
   const PairInput& in = pair_input(data);
   auto pairing = backend_or_skip(state, backend);
   if (!pairing) return;
-  const bool reduced = row == Row::kReducedApx;
+  const bool reduced = row == Row::kReducedApx || row == Row::kReducedKdAccelerated || row == Row::kReducedApxAccelerated;
   IcpSettings icp;
   icp.method = row == Row::kAllBrute ? SearchMethod::kBruteForce
-               : row == Row::kAllKd  ? SearchMethod::kExact
-                                     : SearchMethod::kApproximate;
+               : row == Row::kAllKd || row == Row::kAllKdAccelerated || row == Row::kReducedKdAccelerated
+                   ? SearchMethod::kExact
+                   : SearchMethod::kApproximate;
+  icp.accelerate = row == Row::kAllKdAccelerated || row == Row::kReducedKdAccelerated || row == Row::kReducedApxAccelerated;
   if (row == Row::kAllBrute) icp.max_iterations = 1;  // one timed iteration; see the header
   icp.min_pairs = 3;
   IcpResult last;
@@ -91,13 +104,23 @@ void BM_Table1_Pair(benchmark::State& state, std::string data, Backend backend, 
   state.counters["pairs"] = static_cast<double>(last.pairs);
   state.counters["model_points"] = static_cast<double>((reduced ? in.model_reduced : in.model_all).size());
   state.counters["rms_cm"] = last.rms_cm;
+  state.counters["accelerations"] = last.accelerations;
+  state.counters["rejected_accelerations"] = last.rejected_accelerations;
+  const EulerPose final_pose = pose_to_euler(last.world_from_data);
+  for (int i = 0; i < 3; ++i) {
+    state.counters["final_t" + std::to_string(i) + "_cm"] = final_pose.position_cm[i];
+    state.counters["final_r" + std::to_string(i) + "_deg"] = final_pose.angles_deg[i];
+  }
 }
 
 void register_pair_rows() {
   for (const std::string data : {"mine", "lidar"}) {
     for (const auto& [backend_name, backend] : {std::pair{"cpu", Backend::kCpu}, std::pair{"opencl", Backend::kOpenCl}}) {
       for (const auto& [row_name, row] : {std::pair{"all_brute", Row::kAllBrute}, std::pair{"all_kd", Row::kAllKd},
-                                          std::pair{"all_apx", Row::kAllApx}, std::pair{"reduced_apx", Row::kReducedApx}}) {
+                                          std::pair{"all_apx", Row::kAllApx}, std::pair{"reduced_apx", Row::kReducedApx},
+                                          std::pair{"all_kd_accelerated", Row::kAllKdAccelerated},
+                                          std::pair{"reduced_kd_accelerated", Row::kReducedKdAccelerated},
+                                          std::pair{"reduced_apx_accelerated", Row::kReducedApxAccelerated}}) {
         const std::string name = "BM_Table1_Pair/" + data + "/" + backend_name + "/" + row_name;
         auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Table1_Pair, data, backend, row);
         b->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(row == Row::kAllBrute ? 1 : 3);

@@ -87,6 +87,20 @@ tsan_tbb() {
   echo "$prefix/lib/cmake/TBB"
 }
 
+# Exports the runtime options of sanitizer $1, its reports going under folder $2.
+sanitizer_environment() {
+  local reports="$2"
+  if [ "$1" = address ]; then
+    # detect_stack_use_after_return: references to dead locals (costs ~25 %). With ASan and UBSan
+    # in one runtime the last log_path wins, so both name the same files.
+    export ASAN_OPTIONS="detect_leaks=1:detect_stack_use_after_return=1:check_initialization_order=1:strict_init_order=1:log_path=$reports/asan-ubsan"
+    export LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0"
+    export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1:log_path=$reports/asan-ubsan"
+  else
+    export TSAN_OPTIONS="halt_on_error=0:second_deadlock_stack=1:log_path=$reports/tsan"
+  fi
+}
+
 run_one() {
   local sanitizer="$1"; shift
   local build_dir flags cxx_flags="" tbb_args=()
@@ -113,15 +127,7 @@ run_one() {
   local status=0
   (
     cd "$build_dir"
-    if [ "$sanitizer" = address ]; then
-      # detect_stack_use_after_return: references to dead locals (costs ~25 %). With ASan and UBSan
-      # in one runtime the last log_path wins, so both name the same files.
-      export ASAN_OPTIONS="detect_leaks=1:detect_stack_use_after_return=1:check_initialization_order=1:strict_init_order=1:log_path=$reports/asan-ubsan"
-      export LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0"
-      export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1:log_path=$reports/asan-ubsan"
-    else
-      export TSAN_OPTIONS="halt_on_error=0:second_deadlock_stack=1:log_path=$reports/tsan"
-    fi
+    sanitizer_environment "$sanitizer" "$reports"
     ctest --output-on-failure -j"$jobs" --timeout "$timeout" -E "$heavy" -LE long "$@"
   ) || status=$?
   local found=()
@@ -137,5 +143,19 @@ run_one() {
 
 failed=()
 for s in "${sanitizers[@]}"; do run_one "$s" "$@" || failed+=("$s"); done
-if [ ${#failed[@]} -gt 0 ]; then echo "sanitize.sh: FAILED: ${failed[*]}" >&2; exit 1; fi
+if [ ${#failed[@]} -gt 0 ]; then
+  # Repeat what failed at the end, where a log's tail shows it: each failing test once more, with its
+  # output (whether it passes this time tells a flaky failure from a steady one; the run fails anyway).
+  for s in "${failed[@]}"; do
+    dir=build-asan; [ "$s" = thread ] && dir=build-tsan
+    if [ -s "$dir/Testing/Temporary/LastTestsFailed.log" ]; then
+      echo "=== $dir: the failed tests again (the run has failed either way):" >&2
+      cat "$dir/Testing/Temporary/LastTestsFailed.log" >&2
+      (cd "$dir" && sanitizer_environment "$s" "$repo_root/$dir/sanitizer-reports/rerun" && mkdir -p sanitizer-reports/rerun &&
+       ctest --rerun-failed --output-on-failure --timeout "$timeout"; cat sanitizer-reports/rerun/* 2>/dev/null) >&2 || true
+    fi
+  done
+  echo "sanitize.sh: FAILED: ${failed[*]}" >&2
+  exit 1
+fi
 echo "sanitize.sh: ${sanitizers[*]}: every test passed, no sanitizer report"

@@ -95,7 +95,11 @@ TEST(MappingBackends, OpenClAndCpuGiveTheSamePoses) {
   settings.backend = Backend::kOpenCl;  // throws without OpenCL: the test fails, never skips
   const auto device = map_survey(survey.scans, settings);
   ASSERT_EQ(cpu.scans.size(), device.scans.size());
-  EXPECT_NE(device.backend.find("opencl"), std::string::npos) << device.backend;
+  // Everything the run said about its backend, printed with any failure below.
+  std::string said = device.backend + " | note: " + device.backend_note;
+  for (const auto& note : device.notes) said += " | " + note;
+  SCOPED_TRACE(said);
+  EXPECT_NE(device.backend.find("opencl"), std::string::npos);
   for (std::size_t i = 0; i < cpu.scans.size(); ++i) {
     const Pose difference = rigid_inverse(cpu.scans[i].pose_cm) * device.scans[i].pose_cm;
     EXPECT_LT(translation_norm(difference), 0.01) << "scan " << i << " (cm)";

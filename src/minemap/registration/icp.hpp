@@ -23,6 +23,14 @@ struct IcpSettings {
   double min_translation_step_cm = 0.01;   ///< converged when one iteration moves less than this...
   double min_rotation_step_deg = 0.001;    ///< ...and turns less than this
   int min_pairs = 250;                     ///< fewer pairs: no overlap, registration fails
+  /// Anderson acceleration of the exact-search iterations (AA-ICP, Pavlov et al. 2018): the next
+  /// pose extrapolates the last acceleration_history plain ICP steps. Where point-to-point ICP creeps
+  /// along a shallow valley (a rotation about a tunnel's axis), it reaches the valley's end in fewer
+  /// iterations. A jump that does not lower ICP's objective (squared pair distances, the bound
+  /// squared for unpaired points) is taken back and the plain step kept; that costs one pairing.
+  /// Off: plain ICP, as in the paper.
+  bool accelerate = false;
+  int acceleration_history = 5;  ///< steps the extrapolation uses (AA-ICP's m)
 };
 
 enum class IcpStop {
@@ -39,6 +47,8 @@ struct IcpResult {
   int approximate_iterations = 0;
   int exact_iterations = 0;       ///< includes the refinement at the tighter bound
   int refine_iterations = 0;      ///< of which at refine_max_pair_dist_cm
+  int accelerations = 0;          ///< accelerated poses kept (IcpSettings::accelerate)
+  int rejected_accelerations = 0; ///< taken back because the objective rose (each cost one pairing, counted in exact_iterations)
   std::size_t pairs = 0;  ///< pairs in the last iteration
   double rms_cm = 0.0;    ///< RMS pair distance in the last iteration
   IcpStop stop = IcpStop::kConverged;
