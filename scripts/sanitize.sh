@@ -123,7 +123,7 @@ run_one() {
   local built=$SECONDS
 
   local reports="$repo_root/$build_dir/sanitizer-reports"
-  rm -rf "$reports"; mkdir -p "$reports"
+  rm -rf "$reports" "$build_dir/Testing/Temporary/LastTestsFailed.log"; mkdir -p "$reports"
   local status=0
   (
     cd "$build_dir"

@@ -80,7 +80,7 @@ struct MapOptions {
   int slice_stride = 3;
   int point_stride = 1;
   bool sparse_models = false;
-  bool accelerate = false;
+  bool plain_icp = false;
   int model_slice_stride = minemap::MappingSettings{}.model_slice_stride;
   int min_overlap_pairs = 250;
   double moved_translation_cm = minemap::MappingSettings{}.moved_translation_cm;
@@ -157,7 +157,7 @@ int run_map(const MapOptions& options) {
   settings.filter.min_point_spacing_cm = options.min_point_spacing_cm;
   settings.filter.slice_stride = options.slice_stride;
   settings.dense_models = !options.sparse_models;
-  settings.icp.accelerate = options.accelerate;
+  if (options.plain_icp) settings.icp.accelerate = false;
   settings.model_slice_stride = options.model_slice_stride;
   settings.unstructured_point_stride = options.point_stride;
   settings.min_overlap_pairs = options.min_overlap_pairs;
@@ -290,8 +290,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   map_cmd->add_flag("--sparse-models", map.sparse_models,
                     "Match against clouds reduced like the data, as the paper does (faster, less accurate)");
-  map_cmd->add_flag("--accelerate", map.accelerate,
-                    "Anderson-accelerated ICP (AA-ICP): fewer exact iterations where ICP creeps; not in the paper");
+  map_cmd->add_flag("--plain-icp", map.plain_icp,
+                    "ICP as in the paper, without Anderson acceleration (the default accelerates: fewer iterations)");
   map_cmd->add_option("--point-stride", map.point_stride, "Scans without slices: keep every n-th point")->capture_default_str();
   map_cmd->add_option("--min-overlap-pairs", map.min_overlap_pairs, "Overlap threshold (pairs)")->capture_default_str();
   map_cmd->add_option("--moved-translation-cm", map.moved_translation_cm,
