@@ -6,8 +6,6 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
-#include <cstdio>
-#include <cstdlib>
 #include <vector>
 
 #include "minemap/registration/horn.hpp"
