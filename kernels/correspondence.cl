@@ -4,7 +4,7 @@
 // Tree layout (uploaded unchanged from minemap::KdTree):
 //   nodes  int8 {axis (-1 = leaf), a, b, split bits, left_max, right_min, 0, 0}; inner: a/b =
 //          children, left_max/right_min = the children's extents along the axis (float bits);
-//          leaf: a = first point, b = count, split bits = leaf index
+//          leaf: a = first point, b = points to scan (1 for a bucket of copies), split bits = leaf index
 //   points float4 {x, y, z, original index bits}
 //   means  float4 {x, y, z, count} per leaf
 

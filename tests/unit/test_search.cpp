@@ -114,6 +114,26 @@ TEST_P(SearchTest, EdgeCases) {
   }
 }
 
+TEST_P(SearchTest, APileOfCopiesGivesTheFirstCopyAsBruteForceDoes) {
+  // A LiDAR's no-return points pile up at its origin; the tree scans one copy of such a bucket.
+  auto model_points = random_cloud(2000, -500.f, 500.f, 21);
+  model_points.insert(model_points.begin() + 700, 600, Eigen::Vector3f::Zero());
+  auto query_points = random_cloud(300, -30.f, 30.f, 22);
+  query_points.insert(query_points.end(), 50, Eigen::Vector3f::Zero());
+  auto model = backend_->prepare(model_points, {});
+  auto data = backend_->prepare(query_points, {});
+  const ModelPlacement placement{model.get(), Pose::Identity()};
+  const auto exact = backend_->nearest(*data, {&placement, 1}, SearchMethod::kExact, {40.f});
+  const auto brute = backend_->nearest(*data, {&placement, 1}, SearchMethod::kBruteForce, {40.f});
+  int at_the_pile = 0;
+  for (std::size_t i = 0; i < query_points.size(); ++i) {
+    EXPECT_EQ(exact[i].squared_distance_cm2, brute[i].squared_distance_cm2) << "query " << i;
+    EXPECT_EQ(exact[i].model_point, brute[i].model_point) << "query " << i;
+    at_the_pile += exact[i].model_point >= 700 && exact[i].model_point < 1300 ? 1 : 0;
+  }
+  EXPECT_GE(at_the_pile, 50);  // the zero queries at least
+}
+
 TEST_P(SearchTest, EmptyModelAndEmptyData) {
   auto empty = backend_->prepare({}, {});
   auto cloud = backend_->prepare(random_cloud(100, 0.f, 10.f, 5), {});
@@ -232,10 +252,20 @@ TEST(KdTree, BucketsHoldAtMostBucketSizePointsAndCutInHalves) {
     }
     EXPECT_EQ(total, cloud.size());
   }
-  // All-duplicate input ends in one oversized bucket instead of infinite recursion.
+  // All-duplicate input ends in one oversized bucket instead of infinite recursion, searched as
+  // its first point (the first of equals wins anyway); its mean still counts every copy.
   std::vector<Eigen::Vector3f> same(1000, Eigen::Vector3f(1, 2, 3));
   KdTree dup(same, {10});
-  EXPECT_EQ(dup.nodes().size(), 1u);
+  ASSERT_EQ(dup.nodes().size(), 1u);
+  EXPECT_EQ(dup.nodes()[0].b, 1);
+  EXPECT_EQ(dup.leaf_means()[0][3], 1000.0f);
+  // Near copies that no cut can separate (adjacent floats) are not copies: all of them are scanned.
+  std::vector<Eigen::Vector3f> near_copies(30, Eigen::Vector3f(1, 2, 3));
+  near_copies[17].x() = std::nextafter(1.0f, 2.0f);
+  KdTree near(near_copies, {10});
+  std::size_t scanned = 0;
+  for (const auto& node : near.nodes()) scanned += node.axis == KdNode::kLeaf ? static_cast<std::size_t>(node.b) : 0;
+  EXPECT_EQ(scanned, near_copies.size());
 }
 
 // The CPU backend starts each exact search from the previous query's closest point as a bound.

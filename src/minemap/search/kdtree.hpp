@@ -22,7 +22,9 @@ struct KdTreeSettings {
 /// Inner node: axis in 0..2, a = left child, b = right child, split = cut value (cm); left_max /
 /// right_min = the extent of the children's points along the axis (the gap between them lets the
 /// exact search prune more than the cut plane alone).
-/// Leaf: axis = kLeaf, a = first point in `points`, b = count, split bits = leaf index (int).
+/// Leaf: axis = kLeaf, a = first point in `points`, b = the points to scan, split bits = leaf index
+/// (int). b is the bucket's size, or 1 for a bucket of copies of one point (the first of equals
+/// wins, so scanning one copy finds what scanning all would); its leaf mean still counts them all.
 struct KdNode {
   static constexpr std::int32_t kLeaf = -1;
   std::int32_t axis = kLeaf;
