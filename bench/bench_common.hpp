@@ -6,6 +6,9 @@
 #include <vector>
 
 #include <benchmark/benchmark.h>
+#include <tbb/global_control.h>
+
+#include <cstdlib>
 
 #include "minemap/filter/slice_filter.hpp"
 #include "minemap/search/pairing.hpp"
@@ -41,6 +44,17 @@ inline std::unique_ptr<PairingBackend> backend_or_skip(benchmark::State& state, 
 }
 
 inline std::filesystem::path shared_data() { return MINEMAP_SHARED_DATA_DIR; }
+
+/// MINEMAP_BENCH_THREADS=N caps TBB at N threads for the whole program (unset: all cores).
+/// bench/count_instructions.py runs rows on one thread under callgrind, where worker threads'
+/// spin-waiting would make the instruction counts vary from run to run.
+inline const std::unique_ptr<tbb::global_control> thread_limit = []() -> std::unique_ptr<tbb::global_control> {
+  const char* text = std::getenv("MINEMAP_BENCH_THREADS");
+  const int threads = text ? std::atoi(text) : 0;
+  if (threads <= 0) return nullptr;
+  return std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                               static_cast<std::size_t>(threads));
+}();
 
 /// ../shared/data/fast_gicp_pair: target, source (about 69k points each), cm.
 struct RealPair {
