@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# Shows what the two quick timing studies resolve on this machine:
+#   1. builds a copy of HEAD with a deliberate regression in the CPU backend, in a git worktree
+#      under /tmp (the repo is not touched): every 9th query is searched a second time, without
+#      the hint, so the search does about 11 % more work;
+#   2. bench/count_instructions.py, HEAD against the regressed copy: every row must be SLOWER;
+#      and HEAD against itself: every count must be the same;
+#   3. bench/ab_compare.py (wall time, interleaved), HEAD against the regressed copy and against
+#      itself: reported, not gated, since on this VM it does not resolve 10 % (docs/benchmarks.md).
+# usage: bench/regression_drill.sh [BUILD]   (default build/, holding HEAD's bench binaries)
+# Output: out/bench-drill/. About 12 min on 2 cores, a third of it the build.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+build="$(cd "${1:-build}" && pwd)"
+drill=/tmp/minemap-regression-drill
+out=out/bench-drill
+git worktree remove --force "$drill" 2>/dev/null || rm -rf "$drill"
+git worktree add --detach "$drill" HEAD >/dev/null
+trap 'git worktree remove --force "$drill" 2>/dev/null || true' EXIT
+target=src/minemap/search/pairing_cpu.cpp
+line='          const NearestPair pair = find_nearest(points[i], placed, method, max_squared, hints.data());'
+grep -qF "$line" "$drill/$target" || { echo "regression_drill.sh: $target changed; update the drill" >&2; exit 2; }
+slower='          if (i % 9 == 0) { std::vector<std::int32_t> spare(placed.size(), -1); volatile float sink = find_nearest(points[i], placed, method, max_squared, spare.data()).squared_distance_cm2; (void)sink; }'
+sed -i "s|^$line|$slower\n&|" "$drill/$target"
+cmake -S "$drill" -B "$drill/build" -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_BENCH=ON \
+  -DMINEMAP_BUILD_TESTS=OFF -DMINEMAP_BUILD_FUZZ=OFF >/dev/null
+cmake --build "$drill/build" -j"$(nproc)" --target bench_table1 bench_search >/dev/null
+status=0
+echo "== instructions: HEAD against HEAD with every 9th query searched twice"
+if bench/count_instructions.py "$build" "$drill/build" --out "$out/instructions-regressed"; then
+  echo "regression_drill.sh: the regression was NOT detected" >&2; status=1
+fi
+echo "== instructions: HEAD against itself"
+bench/count_instructions.py "$build" "$build" --out "$out/instructions-same" || { echo "regression_drill.sh: false alarm" >&2; status=1; }
+echo "== wall time (interleaved A/B): HEAD against the regressed copy, then against itself (not gated)"
+bench/ab_compare.py "$build" "$drill/build" --out "$out/time-regressed" || true
+bench/ab_compare.py "$build" "$build" --out "$out/time-same" || true
+exit $status
