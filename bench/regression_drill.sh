@@ -21,7 +21,12 @@ target=src/minemap/search/pairing_cpu.cpp
 line='          const NearestPair pair = find_nearest(points[i], placed, method, max_squared, hints.data());'
 grep -qF "$line" "$drill/$target" || { echo "regression_drill.sh: $target changed; update the drill" >&2; exit 2; }
 slower='          if (i % 9 == 0) { std::vector<std::int32_t> spare(placed.size(), -1); volatile float sink = find_nearest(points[i], placed, method, max_squared, spare.data()).squared_distance_cm2; (void)sink; }'
-sed -i "s|^$line|$slower\n&|" "$drill/$target"
+python3 - "$drill/$target" "$line" "$slower" <<'PY'
+import pathlib, sys
+path, line, slower = pathlib.Path(sys.argv[1]), sys.argv[2], sys.argv[3]
+path.write_text(path.read_text().replace(line + "\n", slower + "\n" + line + "\n", 1))
+PY
+grep -qF "$slower" "$drill/$target" || { echo "regression_drill.sh: the regression was not applied" >&2; exit 2; }
 cmake -S "$drill" -B "$drill/build" -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_BENCH=ON \
   -DMINEMAP_BUILD_TESTS=OFF -DMINEMAP_BUILD_FUZZ=OFF >/dev/null
 cmake --build "$drill/build" -j"$(nproc)" --target bench_table1 bench_search >/dev/null
