@@ -2,7 +2,7 @@
 """Counts the instructions of Table I's pair rows in two builds (callgrind): a timing study that noise
 cannot move.
 
-usage: bench/count_instructions.py BASE_BUILD [CANDIDATE_BUILD] [--threshold 0.10] [--rows REGEX]
+usage: bench/count_instructions.py BASE_BUILD [CANDIDATE_BUILD] [--threshold 0.03] [--rows REGEX]
                                    [--out DIR]
 
 Each row runs once per build under `valgrind --tool=callgrind`, on one TBB thread
@@ -12,7 +12,8 @@ the same to the instruction from run to run on the same binary, whatever else th
 runs of the mine reduced row: 3,072,831,621 both times), so a change in it is the code's. It counts
 work, not time: a change that only moves data around (cache misses) does not show; bench/ab_compare.py
 measures time. A row is SLOWER when the candidate executes more than (1 + threshold) times the
-base's instructions; exit status 1 then. With one build, it prints that build's counts.
+base's instructions (default 3 %: no noise needs a margin, only changes too small to matter);
+exit status 1 then. With one build, it prints that build's counts.
 Writes instructions.md and instructions.json to --out (default out/bench-instructions).
 About 10 s per row and build on 2 cores (valgrind runs ~50x slower than native).
 """
@@ -56,7 +57,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("base")
     parser.add_argument("candidate", nargs="?")
-    parser.add_argument("--threshold", type=float, default=0.10)
+    parser.add_argument("--threshold", type=float, default=0.03)
     parser.add_argument("--rows", default=ROWS)
     parser.add_argument("--out", default="out/bench-instructions")
     args = parser.parse_args()
