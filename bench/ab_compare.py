@@ -13,9 +13,10 @@ row. Load that drifts over minutes affects both halves of a pair alike and cance
 within a half-round a row is repeated and its fastest repetition kept (interference only ever adds
 time, so the minimum is the least disturbed estimate).
 
-A row is SLOWER when the median paired ratio exceeds 1 + threshold/2 AND at least 80 % of the rounds
-agree (ratio > 1): a 10 % regression (median ~1.10) passes both, while the method's own noise
-(A against A: medians within a few %, ratios on both sides of 1) passes neither. FASTER likewise.
+A row is SLOWER when the median paired ratio exceeds 1 + 3/4 threshold AND at least 80 % of the
+rounds agree (ratio > 1): a 10 % regression (median ~1.10) passes both, while the method's own
+noise (A against A: medians within 3 %, ratios on both sides of 1) passes neither, nor does the few
+percent a relinked binary's code alignment can move an untouched row. FASTER likewise.
 Exit status 1 when any row is SLOWER. Writes ab.md and ab.json to --out (default out/bench-ab).
 """
 import argparse
@@ -54,9 +55,9 @@ def run_once(build, program, pattern, repetitions):
 def verdict(ratios, threshold):
     middle = statistics.median(ratios)
     above = sum(r > 1.0 for r in ratios) / len(ratios)
-    if middle > 1.0 + threshold / 2 and above >= 0.8:
+    if middle > 1.0 + 0.75 * threshold and above >= 0.8:
         return "SLOWER"
-    if middle < 1.0 - threshold / 2 and above <= 0.2:
+    if middle < 1.0 - 0.75 * threshold and above <= 0.2:
         return "faster"
     return "same"
 
