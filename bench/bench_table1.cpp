@@ -67,28 +67,33 @@ const PairInput& pair_input(const std::string& data) {
   return data == "mine" ? mine : lidar;
 }
 
-enum class Row {
-  kAllBrute,
-  kAllKd,
-  kAllApx,
-  kReducedApx,
-  kAllKdAccelerated,
-  kReducedKdAccelerated,
-  kReducedApxAccelerated,
+/// One row of Table I: which points, which search, plain or accelerated ICP.
+struct Row {
+  const char* name;
+  bool reduced;
+  SearchMethod method;
+  bool accelerate;
+};
+constexpr Row kRows[] = {
+    {"all_brute", false, SearchMethod::kBruteForce, false},
+    {"all_kd", false, SearchMethod::kExact, false},
+    {"all_apx", false, SearchMethod::kApproximate, false},
+    {"reduced_apx", true, SearchMethod::kApproximate, false},
+    {"all_kd_accelerated", false, SearchMethod::kExact, true},
+    {"reduced_kd_accelerated", true, SearchMethod::kExact, true},
+    {"reduced_apx_accelerated", true, SearchMethod::kApproximate, true},
 };
 
 void BM_Table1_Pair(benchmark::State& state, std::string data, Backend backend, Row row) {
   const PairInput& in = pair_input(data);
   auto pairing = backend_or_skip(state, backend);
   if (!pairing) return;
-  const bool reduced = row == Row::kReducedApx || row == Row::kReducedKdAccelerated || row == Row::kReducedApxAccelerated;
+  const bool reduced = row.reduced;
+  const bool brute = row.method == SearchMethod::kBruteForce;
   IcpSettings icp;
-  icp.method = row == Row::kAllBrute ? SearchMethod::kBruteForce
-               : row == Row::kAllKd || row == Row::kAllKdAccelerated || row == Row::kReducedKdAccelerated
-                   ? SearchMethod::kExact
-                   : SearchMethod::kApproximate;
-  icp.accelerate = row == Row::kAllKdAccelerated || row == Row::kReducedKdAccelerated || row == Row::kReducedApxAccelerated;
-  if (row == Row::kAllBrute) icp.max_iterations = 1;  // one timed iteration; see the header
+  icp.method = row.method;
+  icp.accelerate = row.accelerate;
+  if (brute) icp.max_iterations = 1;  // one timed iteration; see the header
   icp.min_pairs = 3;
   IcpResult last;
   for (auto _ : state) {
@@ -117,14 +122,10 @@ void BM_Table1_Pair(benchmark::State& state, std::string data, Backend backend, 
 void register_pair_rows() {
   for (const std::string data : {"mine", "lidar"}) {
     for (const auto& [backend_name, backend] : {std::pair{"cpu", Backend::kCpu}, std::pair{"opencl", Backend::kOpenCl}}) {
-      for (const auto& [row_name, row] : {std::pair{"all_brute", Row::kAllBrute}, std::pair{"all_kd", Row::kAllKd},
-                                          std::pair{"all_apx", Row::kAllApx}, std::pair{"reduced_apx", Row::kReducedApx},
-                                          std::pair{"all_kd_accelerated", Row::kAllKdAccelerated},
-                                          std::pair{"reduced_kd_accelerated", Row::kReducedKdAccelerated},
-                                          std::pair{"reduced_apx_accelerated", Row::kReducedApxAccelerated}}) {
-        const std::string name = "BM_Table1_Pair/" + data + "/" + backend_name + "/" + row_name;
+      for (const Row& row : kRows) {
+        const std::string name = "BM_Table1_Pair/" + data + "/" + backend_name + "/" + row.name;
         auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Table1_Pair, data, backend, row);
-        b->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(row == Row::kAllBrute ? 1 : 3);
+        b->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(row.method == SearchMethod::kBruteForce ? 1 : 3);
       }
     }
   }
