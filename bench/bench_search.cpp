@@ -7,14 +7,17 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#ifdef MINEMAP_HAVE_NANOFLANN  // the nanoflann rows are built where CMake finds nanoflann
 #include <nanoflann.hpp>
+
+#include "nanoflann_cloud.hpp"
+#endif
 #ifdef MINEMAP_HAVE_PCL
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_types.h>
 #endif
 
 #include "bench_common.hpp"
-#include "nanoflann_cloud.hpp"
 #include "minemap/registration/icp.hpp"
 #include "minemap/search/pairing.hpp"
 
@@ -43,6 +46,7 @@ BENCHMARK_CAPTURE(BM_SliceFilter, opencl, Backend::kOpenCl)->Unit(benchmark::kMi
 
 // ---- nearest neighbour: minemap backends against nanoflann + TBB on the same points and bound ----
 
+#ifdef MINEMAP_HAVE_NANOFLANN
 /// nanoflann result set for the closest point within a squared radius (the same bound as minemap).
 class BoundedNearest {
  public:
@@ -64,6 +68,7 @@ class BoundedNearest {
   float best_;
   long index_ = -1;
 };
+#endif
 
 constexpr float kMaxPairDistCm = 25.0f;
 
@@ -86,6 +91,7 @@ const QueryInput& query_input(const std::string& data) {
   return data == "mine" ? mine : lidar;
 }
 
+#ifdef MINEMAP_HAVE_NANOFLANN
 void BM_NearestNeighbour_nanoflann_tbb(benchmark::State& state, std::string data) {
   const QueryInput& in = query_input(data);
   NanoflannCloud adaptor{&in.model};
@@ -107,6 +113,7 @@ void BM_NearestNeighbour_nanoflann_tbb(benchmark::State& state, std::string data
 }
 BENCHMARK_CAPTURE(BM_NearestNeighbour_nanoflann_tbb, lidar, "lidar")->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_NearestNeighbour_nanoflann_tbb, mine, "mine")->Unit(benchmark::kMillisecond)->UseRealTime();
+#endif
 
 #ifdef MINEMAP_HAVE_PCL
 /// PCL's KdTreeFLANN, the same bound (radiusSearch with at most one neighbour), TBB over queries.

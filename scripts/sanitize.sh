@@ -87,9 +87,26 @@ tsan_tbb() {
   echo "$prefix/lib/cmake/TBB"
 }
 
+# The sanitizer runtimes symbolize stacks (and match suppressions by function) with llvm-symbolizer.
+# Debian installs it as llvm-symbolizer-NN (package llvm-NN; install-deps.sh test installs it).
+symbolizer="$(command -v llvm-symbolizer || true)"
+if [ -z "$symbolizer" ]; then
+  clang_major="$("$cxx" --version 2>/dev/null | sed -n 's/.*clang version \([0-9]*\).*/\1/p' | head -n 1)"
+  symbolizer="$(command -v "llvm-symbolizer-${clang_major}" || ls /usr/lib/llvm-*/bin/llvm-symbolizer 2>/dev/null | tail -n 1 || true)"
+fi
+if [ -z "$symbolizer" ]; then
+  echo "sanitize.sh: warning: no llvm-symbolizer (apt-get install llvm): reports will show raw addresses" >&2
+fi
+# Lines the runtimes write when the symbolizer is missing or dies: not findings (see run_one).
+symbolizer_noise='^[[:space:]]*$|WARNING: (invalid path to external symbolizer|Can.t read from symbolizer|external symbolizer)|Failed to use and restart external symbolizer|==[0-9]+==WARNING: Symbolizer'
+
 # Exports the runtime options of sanitizer $1, its reports going under folder $2.
 sanitizer_environment() {
   local reports="$2"
+  if [ -n "$symbolizer" ]; then
+    export ASAN_SYMBOLIZER_PATH="$symbolizer" TSAN_SYMBOLIZER_PATH="$symbolizer"
+    export UBSAN_SYMBOLIZER_PATH="$symbolizer" LSAN_SYMBOLIZER_PATH="$symbolizer"
+  fi
   if [ "$1" = address ]; then
     # detect_stack_use_after_return: references to dead locals (costs ~25 %). With ASan and UBSan
     # in one runtime the last log_path wins, so both name the same files.
@@ -130,8 +147,17 @@ run_one() {
     sanitizer_environment "$sanitizer" "$reports"
     ctest --output-on-failure -j"$jobs" --timeout "$timeout" -E "$heavy" -LE long "$@"
   ) || status=$?
-  local found=()
-  for report in "$reports"/*; do [ -e "$report" ] && found+=("$report"); done
+  local found=() noise=()
+  for report in "$reports"/*; do
+    [ -e "$report" ] || continue
+    # A file holding nothing but the runtime's complaints about a missing symbolizer is no finding
+    # (install-deps.sh installs llvm-symbolizer; this only keeps a broken one from failing the run).
+    # Any other line, a real report's, makes it count, symbolized or not.
+    if grep -qvE "$symbolizer_noise" "$report"; then found+=("$report"); else noise+=("$report"); fi
+  done
+  if [ ${#noise[@]} -gt 0 ]; then
+    echo "note: ${#noise[@]} process(es) could not symbolize (no report in them): $(head -n 1 "${noise[0]}")" >&2
+  fi
   if [ ${#found[@]} -gt 0 ]; then
     for report in "${found[@]}"; do echo "--- $report" >&2; cat "$report" >&2; done
     echo "!! $build_dir: ${#found[@]} process(es) wrote sanitizer reports (above)" >&2

@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
-# Builds minemap and runs every test: the unit tests (OpenCL ones on PoCL, failing when no OpenCL
-# platform is found), the fuzz corpora, the unit tests again under ASan+UBSan and under TSan
-# (scripts/sanitize.sh), and a short libFuzzer run of every parser.
-# Usage: scripts/test.sh   (SANITIZERS=0 skips the sanitizer runs, FUZZ_SECONDS=0 the libFuzzer run)
+# Builds minemap and runs every test: a check that the build used only packages install-deps.sh
+# installs (scripts/check-deps.sh), the unit tests (OpenCL ones on PoCL, failing when no OpenCL
+# platform is found), the fuzz corpora, the backend-agreement tests again in a -march=native build,
+# the unit tests again under ASan+UBSan and under TSan (scripts/sanitize.sh), and a short libFuzzer
+# run of every parser.
+# Usage: scripts/test.sh   (SANITIZERS=0 skips the sanitizer runs, FUZZ_SECONDS=0 the libFuzzer run,
+#                          NATIVE=0 the -march=native build of the backend-agreement tests)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh test
@@ -11,8 +14,19 @@ clinfo -l || true
 jobs="$(nproc)"
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_BENCH=ON
 cmake --build build -j"$jobs"
+echo "--- the build used only what 'scripts/install-deps.sh build' installs"
+scripts/check-deps.sh build build
 echo "--- unit tests"
 (cd build && ctest --output-on-failure -j"$jobs" --timeout 900)
+if [ "${NATIVE:-1}" != "0" ]; then
+  # -march=native offers FMA: the library is built with -ffp-contract=off so that the CPU's poses
+  # stay those of the OpenCL kernels (FP_CONTRACT OFF). The backend-agreement tests prove it there.
+  echo "--- native build (-march=native): CPU and OpenCL still agree bit for bit"
+  cmake -S . -B build-native -DCMAKE_BUILD_TYPE=Release -DMINEMAP_NATIVE=ON -DMINEMAP_BUILD_BENCH=OFF > /dev/null
+  cmake --build build-native -j"$jobs" --target test_search test_slice_filter test_mapping test_determinism
+  (cd build-native && ctest --output-on-failure -j"$jobs" --timeout 900 \
+     -R '^(Backends/SearchTest\..*|SearchBackends\..*|SliceFilterBackends\..*|MappingBackends\..*|MappingDeterminism\..*|Determinism\..*)$')
+fi
 fuzz_build_dir=build-fuzz
 if [ "${SANITIZERS:-1}" != "0" ]; then
   echo "--- unit tests under ASan+UBSan and TSan"

@@ -75,6 +75,29 @@ TEST(Cli, UsageAndBackendErrorsHaveTheirOwnExitCodes) {
   EXPECT_NE(output.find("no-such-device"), std::string::npos) << output;
 }
 
+// --threads and --opencl-device work where users type them, before or after the subcommand, and
+// each subcommand's --help lists them (the README lists them among `map`'s options).
+TEST(Cli, ProcessOptionsWorkAfterTheSubcommandAndAreInItsHelp) {
+  TempDir dir;
+  std::string output;
+  ASSERT_EQ(run_cli("simulate --out " + (dir / "s").string() + " --scans 2 --threads 1", &output), 0) << output;
+  EXPECT_EQ(run_cli("map " + (dir / "s").string() + " --out " + (dir / "o").string() + " --threads 1 --quiet", &output),
+            0)
+      << output;
+  EXPECT_EQ(run_cli("map " + (dir / "s").string() + " --out " + (dir / "o2").string() +
+                        " --opencl-device no-such-device --backend opencl --quiet",
+                    &output),
+            6)
+      << output;
+  EXPECT_NE(output.find("no-such-device"), std::string::npos) << output;
+  for (const std::string command : {"map", "simulate"}) {
+    ASSERT_EQ(run_cli(command + " --help", &output), 0) << output;
+    EXPECT_NE(output.find("--threads"), std::string::npos) << command << ":\n" << output;
+  }
+  ASSERT_EQ(run_cli("map --help", &output), 0) << output;
+  EXPECT_NE(output.find("--opencl-device"), std::string::npos) << output;
+}
+
 TEST(Cli, SigintStopsMappingWithExit130AndNoTempFiles) {
   TempDir dir;
   std::string output;

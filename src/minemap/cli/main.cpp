@@ -72,7 +72,6 @@ struct MapOptions {
   double min_step_cm = minemap::IcpSettings{}.min_translation_step_cm;
   double min_step_deg = minemap::IcpSettings{}.min_rotation_step_deg;
   std::string unit;  // empty: the format's default
-  int threads = 0;
   int bucket_size = 10;
   int median_window = 7;
   float outlier_threshold_cm = 200.0f;
@@ -252,14 +251,23 @@ int run_map(const MapOptions& options) {
 int main(int argc, char** argv) {
   CLI::App app{"minemap: 6D SLAM for 3D laser scans of mines (Nuechter et al.)"};
   app.require_subcommand(1);
+  // Process-wide options: accepted before the subcommand and after it (where users type them), and
+  // listed in each subcommand's --help; both places write the same variables.
   int threads = 0;
-  app.add_option("--threads", threads, "Worker threads (0 = all cores)");
   std::string opencl_device;
-  app.add_option("--opencl-device", opencl_device,
-                 "OpenCL device: a substring of 'platform / device' (same as MINEMAP_OPENCL_DEVICE)");
+  const auto add_threads = [&](CLI::App* command) {
+    command->add_option("--threads", threads, "Worker threads (0 = all cores)");
+  };
+  const auto add_opencl_device = [&](CLI::App* command) {
+    command->add_option("--opencl-device", opencl_device,
+                        "OpenCL device: a substring of 'platform / device' (same as MINEMAP_OPENCL_DEVICE)");
+  };
+  add_threads(&app);
+  add_opencl_device(&app);
 
   SimulateOptions sim;
   auto* simulate = app.add_subcommand("simulate", "Write the built-in simulated mine survey (uos format)");
+  add_threads(simulate);
   simulate->add_option("--out", sim.out, "Output folder")->required();
   simulate->add_option("--scans", sim.scans, "Number of scans (0 = the whole 250 m drive)");
   simulate->add_option("--seed", sim.seed, "Random seed");
@@ -268,6 +276,8 @@ int main(int argc, char** argv) {
   auto* map_cmd = app.add_subcommand("map", "Register a survey into one consistent map");
   map_cmd->add_option("survey", map.survey, "Survey folder (uos, pcd, ply or kitti layout)")->required();
   map_cmd->add_option("--out", map.out, "Output folder")->required();
+  add_threads(map_cmd);
+  add_opencl_device(map_cmd);
   map_cmd->add_option("--mode", map.mode, "pairwise | incremental | simultaneous")->capture_default_str();
   map_cmd->add_option("--search", map.search, "kd (exact) | apx (approximate, then exact) | brute")->capture_default_str();
   map_cmd->add_option("--backend", map.backend, "auto | cpu | opencl")->capture_default_str();
