@@ -10,8 +10,8 @@
 
 #include <cstdlib>
 
+#include "minemap/backend/make_backend.hpp"
 #include "minemap/filter/slice_filter.hpp"
-#include "minemap/search/pairing.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/sim/mine_simulator.hpp"
 
@@ -33,10 +33,12 @@ inline const SimulatedPair& simulated_pair() {
   return pair;
 }
 
-/// The requested backend, or nullptr after marking the benchmark skipped (e.g. no OpenCL).
-inline std::unique_ptr<PairingBackend> backend_or_skip(benchmark::State& state, Backend backend) {
+/// The requested backend (MINEMAP_OPENCL_DEVICE and the other variables of
+/// backend_options_from_environment apply), or nullptr after marking the benchmark skipped (e.g. no
+/// OpenCL).
+inline std::unique_ptr<ComputeBackend> backend_or_skip(benchmark::State& state, Backend backend) {
   try {
-    return make_pairing_backend(backend).backend;
+    return make_backend(backend_options_from_environment(backend)).backend;
   } catch (const std::exception& e) {
     state.SkipWithError(e.what());
     return nullptr;

@@ -41,9 +41,9 @@ IcpSettings tight_settings() {
   IcpSettings settings;
   settings.method = SearchMethod::kExact;
   settings.max_pair_dist_cm = kMaxPairDistCm;
-  settings.min_translation_step_cm = 1e-5;
-  settings.min_rotation_step_deg = 1e-6;
-  settings.max_iterations = 500;
+  settings.termination.min_translation_step_cm = 1e-5;
+  settings.termination.min_rotation_step_deg = 1e-6;
+  settings.termination.max_iterations = 500;
   return settings;
 }
 
@@ -51,7 +51,7 @@ IcpSettings tight_settings() {
 const Pose& minemap_pose() {
   static const Pose pose = [] {
     const auto& pair = fast_gicp_pair();
-    auto backend = make_cpu_pairing_backend();
+    auto backend = make_cpu_backend();
     auto target = backend->prepare(pair.target.points_cm, {});
     auto source = backend->prepare(pair.source.points_cm, {});
     const WorldModel model{target.get(), Pose::Identity()};
@@ -82,7 +82,7 @@ void BM_Peers_minemap_cpu(benchmark::State& state) {
   const auto& pair = fast_gicp_pair();
   IcpResult result;
   for (auto _ : state) {
-    auto backend = make_cpu_pairing_backend();
+    auto backend = make_cpu_backend();
     auto target = backend->prepare(pair.target.points_cm, {});
     auto source = backend->prepare(pair.source.points_cm, {});
     const WorldModel model{target.get(), Pose::Identity()};
@@ -107,7 +107,7 @@ void BM_Peers_nanoflann_tbb(benchmark::State& state) {
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     for (const auto& p : source) centroid += p.cast<double>();
     centroid /= static_cast<double>(source.size());
-    while (iterations < settings.max_iterations) {
+    while (iterations < settings.termination.max_iterations) {
       const Eigen::Matrix3f r = pose.block<3, 3>(0, 0).cast<float>();
       const Eigen::Vector3f t = pose.block<3, 1>(0, 3).cast<float>();
       // Sums in the source frame, centred like minemap's, reduced deterministically.
@@ -139,8 +139,8 @@ void BM_Peers_nanoflann_tbb(benchmark::State& state) {
       if (!step) break;
       pose = pose * *step;
       ++iterations;
-      if (translation_norm(*step) < settings.min_translation_step_cm &&
-          rotation_angle_deg(*step) < settings.min_rotation_step_deg) {
+      if (translation_norm(*step) < settings.termination.min_translation_step_cm &&
+          rotation_angle_deg(*step) < settings.termination.min_rotation_step_deg) {
         break;
       }
     }

@@ -27,14 +27,11 @@ namespace {
 void BM_SliceFilter(benchmark::State& state, Backend backend) {
   const Scan& scan = simulated_pair().model;
   SliceFilterSettings settings;
-  std::string note;
-  auto warm = filter_scan(scan, settings, backend, &note);  // builds kernels, fills caches
-  if (backend == Backend::kOpenCl && warm.backend != "opencl") {
-    state.SkipWithError(("OpenCL unavailable: " + note).c_str());
-    return;
-  }
+  auto filter = backend_or_skip(state, backend);
+  if (!filter) return;
+  auto warm = filter->filter_slices(scan, settings);  // fills caches
   for (auto _ : state) {
-    auto result = filter_scan(scan, settings, backend, &note);
+    auto result = filter->filter_slices(scan, settings);
     benchmark::DoNotOptimize(result.points_cm.data());
   }
   state.counters["points_in"] = static_cast<double>(scan.size());
@@ -176,7 +173,7 @@ BENCHMARK_CAPTURE(BM_NearestNeighbour_minemap, mine/opencl_exact, "mine", Backen
 /// PCL loops write theirs.
 void BM_NearestNeighbour_minemap_queries_only(benchmark::State& state, std::string input) {
   const QueryInput& in = query_input(input);
-  auto pairing = make_cpu_pairing_backend();
+  auto pairing = make_cpu_backend();
   auto model = pairing->prepare(in.model, {});
   auto data = pairing->prepare(in.queries, {});
   const ModelPlacement placement{model.get(), Pose::Identity()};
@@ -218,7 +215,7 @@ void BM_RegistrationBucketSize(benchmark::State& state, SearchMethod method) {
   const auto& pair = simulated_pair();
   KdTreeSettings tree;
   tree.bucket_size = static_cast<int>(state.range(0));
-  auto pairing = make_cpu_pairing_backend();
+  auto pairing = make_cpu_backend();
   SliceFilterSettings filter;
   auto model_points = filter_scan_cpu(pair.model, filter).points_cm;
   auto data_points = filter_scan_cpu(pair.data, filter).points_cm;

@@ -90,11 +90,11 @@ void BM_Table1_Pair(benchmark::State& state, std::string data, Backend backend, 
   if (!pairing) return;
   const bool reduced = row.reduced;
   const bool brute = row.method == SearchMethod::kBruteForce;
-  IcpSettings icp;
+  IcpSettings icp = IcpSettings::paper();
   icp.method = row.method;
   icp.accelerate = row.accelerate;
-  if (brute) icp.max_iterations = 1;  // one timed iteration; see the header
-  icp.min_pairs = 3;
+  if (brute) icp.termination.max_iterations = 1;  // one timed iteration; see the header
+  icp.termination.min_pairs = 3;
   IcpResult last;
   for (auto _ : state) {
     auto model = pairing->prepare(reduced ? in.model_reduced : in.model_all, {});
@@ -135,14 +135,14 @@ void BM_Table1_Slam(benchmark::State& state, Backend backend, bool dense_models)
   sim::SimulationSettings settings;
   settings.mine.scans = static_cast<int>(state.range(0));
   const auto survey = sim::simulate_mine_survey(settings);
-  MappingSettings mapping;
-  mapping.backend = backend;
-  mapping.dense_models = dense_models;  // false: the paper's setting (models reduced like the data)...
-  mapping.icp.accelerate = dense_models;  // ...and plain ICP; true: minemap's default, both on
+  // The paper's mapper (models reduced like the data, plain ICP at 25 cm), or minemap's default.
+  const MappingSettings mapping = dense_models ? MappingSettings{} : MappingSettings::paper();
+  auto compute = backend_or_skip(state, backend);
+  if (!compute) return;
   MappingResult result;
   for (auto _ : state) {
     try {
-      result = map_survey(survey.scans, mapping);
+      result = map_survey(survey.scans, mapping, *compute);
     } catch (const std::exception& e) {
       state.SkipWithError(e.what());
       return;

@@ -1,7 +1,6 @@
-// Shared by all minemap kernels. OpenCL C 1.2, float only (no double literals either), except the
-// ICP sums of pair_sums_blocks, built only where the device has cl_khr_fp64; no atomics on floats. Contraction is off so that a*b + c rounds exactly as the C++ reference
-// (built without FMA contraction) does: CPU and device then agree bit for bit on distances.
-#pragma OPENCL FP_CONTRACT OFF
+// Shared by all minemap kernels (after kernels/minemap_shared.h, which the host prepends). OpenCL C
+// 1.2, float only, except the ICP sums of pair_sums_blocks, built only where the device has
+// cl_khr_fp64; no atomics on floats.
 
 // A rigid transform as three rows (xyz = rotation row, w = translation), applied left to right in
 // the same order as minemap::detail::RigidF::apply.
@@ -11,9 +10,4 @@ inline float3 mm_apply_rigid(float4 row0, float4 row1, float4 row2, float3 p) {
                   ((row2.x * p.x + row2.y * p.y) + row2.z * p.z) + row2.w);
 }
 
-inline float mm_squared_distance(float3 a, float3 b) {
-  const float dx = a.x - b.x;
-  const float dy = a.y - b.y;
-  const float dz = a.z - b.z;
-  return (dx * dx + dy * dy) + dz * dz;
-}
+inline float mm_squared_distance(float3 a, float3 b) { return mm_squared_distance3(a.x, a.y, a.z, b.x, b.y, b.z); }

@@ -8,13 +8,9 @@
 //   points float4 {x, y, z, original index bits}
 //   means  float4 {x, y, z, count} per leaf
 
-#ifndef MM_STACK_DEPTH
-#define MM_STACK_DEPTH 64
-#endif
-
-#define MM_EXACT 0
+// `method` of nearest_in_tree: exact search with backtracking, or the approximate kd-tree (brute
+// force has its own kernel, nearest_brute_force).
 #define MM_APPROXIMATE 1
-#define MM_BRUTE_FORCE 2
 
 inline float mm_squared_distance_to_box(float3 q, float4 lo, float4 hi) {
   const float3 below = fmax(lo.xyz - q, (float3)(0.0f));
@@ -47,14 +43,10 @@ inline int mm_search_model(float3 q, __global const int8* nodes, __global const 
     }
     return found;
   }
-  if (method == MM_BRUTE_FORCE) {
-    // Unreachable from the tree search path: brute force has its own tiled kernel below.
-    return 0;
-  }
   // Exact search with incremental cell distances (see exact_nearest in pairing_math.hpp).
-  int stack_node[MM_STACK_DEPTH];
-  float stack_bound[MM_STACK_DEPTH];
-  float3 stack_offset[MM_STACK_DEPTH];
+  int stack_node[MM_MAX_KD_DEPTH];
+  float stack_bound[MM_MAX_KD_DEPTH];
+  float3 stack_offset[MM_MAX_KD_DEPTH];
   int top = 0;
   int node = 0;
   float lower_bound = 0.0f;
@@ -138,10 +130,6 @@ __kernel void nearest_in_tree(__global const float4* data, const int data_count,
   }
 }
 
-#ifndef MM_BRUTE_TILE
-#define MM_BRUTE_TILE 256
-#endif
-
 // Brute force (Table I's baseline): every model point, tiled through local memory. The work-group
 // size must equal MM_BRUTE_TILE. Visits points in tree order, as the CPU oracle does.
 __kernel void nearest_brute_force(__global const float4* data, const int data_count,
@@ -183,8 +171,6 @@ __kernel void nearest_brute_force(__global const float4* data, const int data_co
   }
 }
 
-#define MM_SUM_TERMS 17
-
 // The ICP sums over all pairs, centred on `reference` (data frame): count, sum p', sum m',
 // sum p' m'^T (row-major), sum |p - m|^2. Each work-item strides over the pairs; a tree reduction in
 // local memory (work-group size a power of two) leaves one record of 17 floats per group. The host
@@ -200,23 +186,17 @@ __kernel void pair_sums(__global const float4* data, __global const float4* best
     if (pair.w < 0.0f) continue;
     const float3 p = data[i].xyz - reference.xyz;
     const float3 m = pair.xyz - reference.xyz;
-    acc[0] += 1.0f;
-    acc[1] += p.x;
-    acc[2] += p.y;
-    acc[3] += p.z;
-    acc[4] += m.x;
-    acc[5] += m.y;
-    acc[6] += m.z;
-    acc[7] += p.x * m.x;
-    acc[8] += p.x * m.y;
-    acc[9] += p.x * m.z;
-    acc[10] += p.y * m.x;
-    acc[11] += p.y * m.y;
-    acc[12] += p.y * m.z;
-    acc[13] += p.z * m.x;
-    acc[14] += p.z * m.y;
-    acc[15] += p.z * m.z;
-    acc[16] += pair.w;
+    const float pc[3] = {p.x, p.y, p.z};
+    const float mc[3] = {m.x, m.y, m.z};
+    acc[MM_TERM_COUNT] += 1.0f;
+    for (int r = 0; r < 3; ++r) {
+      acc[MM_TERM_SUM_DATA + r] += pc[r];
+      acc[MM_TERM_SUM_MODEL + r] += mc[r];
+    }
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) acc[MM_TERM_SUM_DATA_MODEL + 3 * r + c] += pc[r] * mc[c];
+    }
+    acc[MM_TERM_SUM_SQUARED_DISTANCE] += pair.w;
   }
   for (int t = 0; t < MM_SUM_TERMS; ++t) scratch[t * wg + lid] = acc[t];
   barrier(CLK_LOCAL_MEM_FENCE);
@@ -232,21 +212,19 @@ __kernel void pair_sums(__global const float4* data, __global const float4* best
 }
 
 #ifdef MM_HAVE_FP64
-#pragma OPENCL EXTENSION cl_khr_fp64 : enable
-
-// The ICP sums exactly as the CPU backend makes them (PairSums::add_pair in
-// src/minemap/search/pairing.cpp): work-item b sums the pairs of data points [b * block_size,
-// (b + 1) * block_size) in double, in index order, term by term in the same operations, and writes
-// one record of 17 doubles; the host adds the records in block order as the CPU adds its blocks.
-// The CPU and this kernel then produce the same bits, and so the same poses. Built only where the
-// device has cl_khr_fp64 (the host passes -DMM_HAVE_FP64); elsewhere pair_sums (float) is used.
+// The ICP sums exactly as the CPU backend makes them: work-item b sums the pairs of data points
+// [b * MM_PAIR_SUM_BLOCK, (b + 1) * MM_PAIR_SUM_BLOCK) in double, in index order, through the
+// C++ backend's own step (mm_add_point_to_point_terms, kernels/minemap_shared.h), and writes one
+// record of MM_SUM_TERMS doubles; the host adds the records in block order as the CPU adds its
+// blocks. The CPU and this kernel then produce the same bits, and so the same poses. Built only
+// where the device has cl_khr_fp64 (the host passes -DMM_HAVE_FP64); elsewhere pair_sums (float).
 __kernel void pair_sums_blocks(__global const float4* data, __global const float4* best_pair, const int data_count,
-                               const int block_size, const double reference_x, const double reference_y,
-                               const double reference_z, __global double* partials) {
+                               const double reference_x, const double reference_y, const double reference_z,
+                               __global double* partials) {
   const int b = get_global_id(0);
-  const int begin = b * block_size;
+  const int begin = b * MM_PAIR_SUM_BLOCK;
   if (begin >= data_count) return;
-  const int end = min(data_count, begin + block_size);
+  const int end = min(data_count, begin + MM_PAIR_SUM_BLOCK);
   double acc[MM_SUM_TERMS];
   for (int t = 0; t < MM_SUM_TERMS; ++t) acc[t] = 0.0;
   for (int i = begin; i < end; ++i) {
@@ -255,15 +233,7 @@ __kernel void pair_sums_blocks(__global const float4* data, __global const float
     const float4 point = data[i];
     const double pc[3] = {(double)point.x - reference_x, (double)point.y - reference_y, (double)point.z - reference_z};
     const double mc[3] = {(double)pair.x - reference_x, (double)pair.y - reference_y, (double)pair.z - reference_z};
-    acc[0] += 1.0;
-    for (int r = 0; r < 3; ++r) {
-      acc[1 + r] += pc[r];
-      acc[4 + r] += mc[r];
-    }
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) acc[7 + 3 * r + c] += pc[r] * mc[c];
-    }
-    acc[16] += (double)pair.w;
+    mm_add_point_to_point_terms(acc, pc, mc, pair.w);
   }
   for (int t = 0; t < MM_SUM_TERMS; ++t) partials[b * MM_SUM_TERMS + t] = acc[t];
 }

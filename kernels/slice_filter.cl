@@ -4,11 +4,7 @@
 // their mean so that consecutive output points are at least `min_spacing` apart.
 // One work-item per kept slice; mirrors src/minemap/filter/slice_filter_cpu.cpp step for step.
 
-#ifndef MM_MAX_MEDIAN_WINDOW
-#define MM_MAX_MEDIAN_WINDOW 31
-#endif
-
-inline float mm_squared_range(float4 p) { return (p.x * p.x + p.y * p.y) + p.z * p.z; }
+inline float mm_squared_range(float4 p) { return mm_squared_norm3(p.x, p.y, p.z); }
 
 // Index (into the slice) of the lower-median-range point of the window around `i`.
 inline int mm_median_index(__global const float4* slice, int count, int i, int half_window) {
@@ -18,16 +14,8 @@ inline int mm_median_index(__global const float4* slice, int count, int i, int h
   const int last = min(count - 1, i + half_window);
   int n = 0;
   for (int j = first; j <= last; ++j) {
-    const float key = mm_squared_range(slice[j]);
-    int k = n;
     // Insertion sort by (squared range, index): ties resolved by index, as on the CPU.
-    while (k > 0 && (keys[k - 1] > key)) {
-      keys[k] = keys[k - 1];
-      ids[k] = ids[k - 1];
-      --k;
-    }
-    keys[k] = key;
-    ids[k] = j;
+    mm_insert_sorted(keys, ids, n, mm_squared_range(slice[j]), j);
     ++n;
   }
   return ids[(n - 1) / 2];

@@ -11,6 +11,18 @@
 
 namespace minemap::test {
 
+std::unique_ptr<ComputeBackend> opencl_backend(const opencl::OpenClOptions* options) {
+  BackendOptions backend = backend_options_from_environment(Backend::kOpenCl);
+  if (options) backend.opencl = *options;
+  return make_backend(backend).backend;
+}
+
+std::unique_ptr<ComputeBackend> backend_named(const std::string& name) {
+  if (name == "cpu") return make_cpu_backend();
+  if (name == "opencl") return opencl_backend();
+  throw std::invalid_argument("no backend named " + name);
+}
+
 std::filesystem::path shared_data_dir() { return MINEMAP_SHARED_DATA_DIR; }
 
 TempDir::TempDir(const std::string& tag) {

@@ -3,11 +3,22 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "minemap/backend/make_backend.hpp"
+
 namespace minemap::test {
+
+/// The OpenCL backend as the tests use it: PoCL allowed, MINEMAP_OPENCL_* from the environment
+/// applied (the float-sum run sets MINEMAP_OPENCL_FP64=off). Throws without OpenCL, so a test that
+/// asks for it fails, never skips.
+std::unique_ptr<ComputeBackend> opencl_backend(const opencl::OpenClOptions* options = nullptr);
+
+/// "cpu" or "opencl" (opencl_backend()).
+std::unique_ptr<ComputeBackend> backend_named(const std::string& name);
 
 /// ../shared/data beside the checkout (MINEMAP_SHARED_DATA_DIR at configure time).
 std::filesystem::path shared_data_dir();

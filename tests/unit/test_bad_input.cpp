@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "io_test_helpers.hpp"
+#include "minemap/cli/exit_codes.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/sim/mine_simulator.hpp"
 

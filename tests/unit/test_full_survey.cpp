@@ -5,6 +5,7 @@
 
 #include <cstdio>
 
+#include "minemap/backend/cpu_backend.hpp"
 #include "minemap/sim/mine_simulator.hpp"
 #include "minemap/slam/survey_matching.hpp"
 
@@ -15,8 +16,8 @@ TEST(MappingFullSurvey, DefaultSurveyIsWithinTwoPerMilleOfTheDrive) {
   const auto survey = sim::simulate_mine_survey(sim::SimulationSettings{});  // seed 1 = `minemap simulate`
   ASSERT_EQ(survey.scans.size(), 64u);
   MappingSettings settings;  // the defaults of `minemap map`
-  settings.backend = Backend::kCpu;
-  const auto result = map_survey(survey.scans, settings);
+  CpuBackend cpu;
+  const auto result = map_survey(survey.scans, settings, cpu);
   ASSERT_TRUE(result.all_registered());
   std::vector<Pose> poses, odometry;
   for (std::size_t i = 0; i < result.scans.size(); ++i) {

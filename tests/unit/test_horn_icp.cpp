@@ -460,7 +460,7 @@ IcpSettings icp_settings(SearchMethod method) {
   IcpSettings s;
   s.method = method;
   s.max_pair_dist_cm = 50.0f;
-  s.max_iterations = 200;
+  s.termination.max_iterations = 200;
   return s;
 }
 
@@ -468,7 +468,7 @@ class IcpRoomTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     problem_ = new RoomProblem();
-    backend_ = make_cpu_pairing_backend().release();
+    backend_ = make_cpu_backend().release();
     model_ = backend_->prepare(problem_->room, {});
     data_ = backend_->prepare(problem_->data_points, {});
   }
@@ -504,12 +504,12 @@ class IcpRoomTest : public ::testing::Test {
   }
 
   static RoomProblem* problem_;
-  static PairingBackend* backend_;
+  static ComputeBackend* backend_;
   static std::shared_ptr<const PreparedCloud> model_;
   static std::shared_ptr<const PreparedCloud> data_;
 };
 RoomProblem* IcpRoomTest::problem_ = nullptr;
-PairingBackend* IcpRoomTest::backend_ = nullptr;
+ComputeBackend* IcpRoomTest::backend_ = nullptr;
 std::shared_ptr<const PreparedCloud> IcpRoomTest::model_;
 std::shared_ptr<const PreparedCloud> IcpRoomTest::data_;
 
@@ -555,7 +555,7 @@ TEST_F(IcpRoomTest, StartingAtTheTruthStaysThere) {
 TEST_F(IcpRoomTest, IterationCapStopsWithThePoseSoFar) {
   const WorldModel m{model_.get(), problem_->world_from_model};
   auto settings = icp_settings(SearchMethod::kExact);
-  settings.max_iterations = 3;
+  settings.termination.max_iterations = 3;
   const auto r = register_icp(*backend_, *data_, problem_->world_from_data_initial, {&m, 1}, settings);
   EXPECT_EQ(r.stop, IcpStop::kMaxIterations);
   EXPECT_TRUE(r.ok());
@@ -595,7 +595,7 @@ TEST_F(IcpRoomTest, TooFewPairsIsThePapersOverlapTest) {
   EXPECT_EQ(r.stop, IcpStop::kTooFewPairs);
   EXPECT_TRUE(r.world_from_data == problem_->world_from_data_initial);
   EXPECT_GT(r.pairs, 100u);  // pairs were found, just not enough
-  settings.min_pairs = 100;
+  settings.termination.min_pairs = 100;
   const auto relaxed = register_icp(*backend_, *data, problem_->world_from_data_initial, {&m, 1}, settings);
   EXPECT_TRUE(relaxed.ok()) << to_string(relaxed.stop);
 }
@@ -660,9 +660,9 @@ TEST_F(IcpRoomTest, DeterministicRunToRunAndAcrossThreadCounts) {
 
 /// Forwards to a backend and records every pairing call: which search, and the RMS it found.
 /// Forwards every call to another backend; test decorators override what they observe or break.
-class ForwardingBackend : public PairingBackend {
+class ForwardingBackend : public ComputeBackend {
  public:
-  explicit ForwardingBackend(PairingBackend& inner) : inner_(inner) {}
+  explicit ForwardingBackend(ComputeBackend& inner) : inner_(inner) {}
   std::string name() const override { return inner_.name(); }
   std::string device_description() const override { return inner_.device_description(); }
   std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points,
@@ -678,8 +678,13 @@ class ForwardingBackend : public PairingBackend {
     return inner_.nearest(data, models, method, settings);
   }
 
+ protected:
+  SliceFilterResult filter_slices_checked(const Scan& scan, const SliceFilterSettings& settings) override {
+    return inner_.filter_slices(scan, settings);
+  }
+
  private:
-  PairingBackend& inner_;
+  ComputeBackend& inner_;
 };
 
 class RecordingBackend final : public ForwardingBackend {
@@ -747,8 +752,8 @@ TEST_F(IcpRoomTest, ApproximatePhaseThatSettlesIsStillFinishedWithExactSearch) {
   // error): the schedule must still switch to exact search before declaring convergence.
   const WorldModel m{model_.get(), problem_->world_from_model};
   auto settings = icp_settings(SearchMethod::kApproximate);
-  settings.min_translation_step_cm = 3.0;
-  settings.min_rotation_step_deg = 0.5;
+  settings.termination.min_translation_step_cm = 3.0;
+  settings.termination.min_rotation_step_deg = 0.5;
   RecordingBackend recorder(*backend_);
   const auto r = register_icp(recorder, *data_, problem_->world_from_data_initial, {&m, 1}, settings);
   EXPECT_TRUE(r.converged()) << to_string(r.stop);
@@ -766,7 +771,7 @@ TEST_F(IcpRoomTest, ApproximatePhaseThatSettlesIsStillFinishedWithExactSearch) {
 class FaultyBackend final : public ForwardingBackend {
  public:
   enum class Fault { kNaN, kNoPairs };
-  FaultyBackend(PairingBackend& inner, int from_call, Fault fault)
+  FaultyBackend(ComputeBackend& inner, int from_call, Fault fault)
       : ForwardingBackend(inner), from_(from_call), fault_(fault) {}
   std::string name() const override { return "faulty"; }
   std::string device_description() const override { return "faulty"; }
@@ -814,8 +819,8 @@ TEST_F(IcpRoomTest, FailureInAnyIterationReturnsTheInitialPose) {
 
 TEST(IcpBackends, CpuAndOpenClAgree) {
   const RoomProblem problem;
-  auto cpu = make_cpu_pairing_backend();
-  auto device = make_pairing_backend(Backend::kOpenCl).backend;  // throws (test fails) without OpenCL
+  auto cpu = make_cpu_backend();
+  auto device = test::opencl_backend();  // throws (test fails) without OpenCL
   ASSERT_NE(device, nullptr);
   EXPECT_EQ(device->name(), "opencl");
   auto cpu_model = cpu->prepare(problem.room, {});
@@ -873,8 +878,8 @@ TEST(IcpAcceleration, MinePairReachesThePlainResultInFewerIterationsOnBothBacken
   simulation.mine.scans = 2;
   simulation.mine.seed = 1;
   const auto survey = sim::simulate_mine_survey(simulation);
-  auto cpu = make_cpu_pairing_backend();
-  auto device = make_pairing_backend(Backend::kOpenCl).backend;  // throws (test fails) without OpenCL
+  auto cpu = make_cpu_backend();
+  auto device = test::opencl_backend();  // throws (test fails) without OpenCL
   const auto model_points = filter_scan_cpu(survey.scans[0], {}).points_cm;
   const auto data_points = filter_scan_cpu(survey.scans[1], {}).points_cm;
   const auto model = cpu->prepare(model_points, {});
@@ -887,9 +892,9 @@ TEST(IcpAcceleration, MinePairReachesThePlainResultInFewerIterationsOnBothBacken
   IcpSettings settings;
   settings.method = SearchMethod::kExact;
   IcpSettings tight = settings;
-  tight.min_translation_step_cm = 1e-5;
-  tight.min_rotation_step_deg = 1e-6;
-  tight.max_iterations = 400;
+  tight.termination.min_translation_step_cm = 1e-5;
+  tight.termination.min_rotation_step_deg = 1e-6;
+  tight.termination.max_iterations = 400;
   const auto reference = register_icp(*cpu, *data, start, {&placed, 1}, tight);
   ASSERT_TRUE(reference.ok());
 

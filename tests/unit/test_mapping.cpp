@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <fstream>
 
+#include "minemap/backend/cpu_backend.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/registration/icp.hpp"
 #include "minemap/sim/mine_simulator.hpp"
@@ -40,11 +41,11 @@ TEST(MappingSimulatedMine, SimultaneousMatchingIsAccurateAndBeatsPairwise) {
   // figures are in docs/benchmarks.md.)
   const auto survey = small_survey(24);
   MappingSettings settings;
-  settings.backend = Backend::kCpu;
+  CpuBackend cpu;
   settings.mode = MatchingMode::kPairwise;
-  const auto pairwise = map_survey(survey.scans, settings);
+  const auto pairwise = map_survey(survey.scans, settings, cpu);
   settings.mode = MatchingMode::kSimultaneous;
-  const auto simultaneous = map_survey(survey.scans, settings);
+  const auto simultaneous = map_survey(survey.scans, settings, cpu);
   ASSERT_TRUE(pairwise.all_registered());
   ASSERT_TRUE(simultaneous.all_registered());
   const auto odometry = pose_errors(odometry_of(survey.scans), survey.truth_cm);
@@ -63,9 +64,9 @@ TEST(MappingSimulatedMine, SimultaneousMatchingIsAccurateAndBeatsPairwise) {
 TEST(MappingSimulatedMine, IncrementalMatchingBeatsOdometry) {
   const auto survey = small_survey(8, 11);
   MappingSettings settings;
-  settings.backend = Backend::kCpu;
+  CpuBackend cpu;
   settings.mode = MatchingMode::kIncremental;
-  const auto result = map_survey(survey.scans, settings);
+  const auto result = map_survey(survey.scans, settings, cpu);
   ASSERT_TRUE(result.all_registered());
   const auto odometry = pose_errors(odometry_of(survey.scans), survey.truth_cm);
   const auto incremental = pose_errors(poses_of(result), survey.truth_cm);
@@ -76,11 +77,11 @@ TEST(MappingSimulatedMine, IncrementalMatchingBeatsOdometry) {
 TEST(MappingDeterminism, BitIdenticalPosesRunToRunAndForOneOrTwoThreads) {
   const auto survey = small_survey(5, 3);
   MappingSettings settings;
-  settings.backend = Backend::kCpu;
+  CpuBackend cpu;
   std::vector<Pose> one, two, again;
-  tbb::task_arena(1).execute([&] { one = poses_of(map_survey(survey.scans, settings)); });
-  tbb::task_arena(2).execute([&] { two = poses_of(map_survey(survey.scans, settings)); });
-  tbb::task_arena(2).execute([&] { again = poses_of(map_survey(survey.scans, settings)); });
+  tbb::task_arena(1).execute([&] { one = poses_of(map_survey(survey.scans, settings, cpu)); });
+  tbb::task_arena(2).execute([&] { two = poses_of(map_survey(survey.scans, settings, cpu)); });
+  tbb::task_arena(2).execute([&] { again = poses_of(map_survey(survey.scans, settings, cpu)); });
   for (std::size_t i = 0; i < one.size(); ++i) {
     EXPECT_EQ(one[i], two[i]) << "scan " << i;
     EXPECT_EQ(two[i], again[i]) << "scan " << i;
@@ -90,10 +91,10 @@ TEST(MappingDeterminism, BitIdenticalPosesRunToRunAndForOneOrTwoThreads) {
 TEST(MappingBackends, OpenClAndCpuGiveTheSamePoses) {
   const auto survey = small_survey(5, 5);
   MappingSettings settings;
-  settings.backend = Backend::kCpu;
-  const auto cpu = map_survey(survey.scans, settings);
-  settings.backend = Backend::kOpenCl;  // throws without OpenCL: the test fails, never skips
-  const auto device = map_survey(survey.scans, settings);
+  CpuBackend cpu_backend;
+  const auto cpu = map_survey(survey.scans, settings, cpu_backend);
+  auto opencl = test::opencl_backend();  // throws without OpenCL: the test fails, never skips
+  const auto device = map_survey(survey.scans, settings, *opencl);
   ASSERT_EQ(cpu.scans.size(), device.scans.size());
   // Everything the run said about its backend, printed with any failure below.
   std::string said = device.backend + " | note: " + device.backend_note;
@@ -112,12 +113,13 @@ TEST(MappingBackends, OpenClAndCpuGiveTheSamePoses) {
 TEST(MappingBackends, AnOpenClFailureMidRunFallsBackToTheCpuPoses) {
   const auto survey = small_survey(4, 5);
   MappingSettings settings;
-  settings.backend = Backend::kCpu;
-  const auto cpu = map_survey(survey.scans, settings);
-  ::setenv("MINEMAP_OPENCL_INJECT_FAULT", "20", 1);  // the 20th pairing call fails
-  settings.backend = Backend::kOpenCl;
-  const auto recovered = map_survey(survey.scans, settings);
-  ::unsetenv("MINEMAP_OPENCL_INJECT_FAULT");
+  CpuBackend cpu_backend;
+  const auto cpu = map_survey(survey.scans, settings, cpu_backend);
+  opencl::OpenClOptions faulty;
+  faulty.allow_cpu_device = true;
+  faulty.fault = opencl::InjectedFault::parse("20");  // the 20th kernel launch fails (a pairing launch)
+  auto opencl = test::opencl_backend(&faulty);
+  const auto recovered = map_survey(survey.scans, settings, *opencl);
   ASSERT_EQ(recovered.notes.size(), 1u);
   EXPECT_NE(recovered.notes.front().find("CL_OUT_OF_RESOURCES"), std::string::npos) << recovered.notes.front();
   EXPECT_NE(recovered.backend.find("cpu"), std::string::npos);
@@ -150,16 +152,16 @@ TEST(MappingRealData, FastGicpPairMatchesAnIndependentPointToPointIcp) {
       0.0004733573, 0.0000826942, 1.000000361, -2.2332278965,           //
       0, 0, 0, 1;
   oracle = orthonormalised(oracle);
-  for (Backend backend : {Backend::kCpu, Backend::kOpenCl}) {
-    auto pairing = make_pairing_backend(backend).backend;
+  for (const std::string backend : {"cpu", "opencl"}) {
+    auto pairing = test::backend_named(backend);
     auto target_cloud = pairing->prepare(target.points_cm, {});
     auto source_cloud = pairing->prepare(source.points_cm, {});
     IcpSettings settings;
     settings.method = SearchMethod::kExact;
     settings.max_pair_dist_cm = 25.0f;
-    settings.min_translation_step_cm = 1e-5;
-    settings.min_rotation_step_deg = 1e-6;
-    settings.max_iterations = 500;
+    settings.termination.min_translation_step_cm = 1e-5;
+    settings.termination.min_rotation_step_deg = 1e-6;
+    settings.termination.max_iterations = 500;
     const WorldModel model{target_cloud.get(), target.world_from_points()};
     Scan placed = source;
     placed.pose_cm = target.pose_cm * reference;
@@ -171,7 +173,7 @@ TEST(MappingRealData, FastGicpPairMatchesAnIndependentPointToPointIcp) {
     const Pose to_oracle = rigid_inverse(oracle) * estimated;
     const Pose to_reference = rigid_inverse(reference) * estimated;
     std::printf("%s: %d iterations, %zu pairs, rms %.3f cm; to oracle %.4f cm %.5f deg; to relative.txt %.3f cm %.3f deg\n",
-                to_string(backend), result.iterations(), result.pairs, result.rms_cm, translation_norm(to_oracle),
+                backend.c_str(), result.iterations(), result.pairs, result.rms_cm, translation_norm(to_oracle),
                 rotation_angle_deg(to_oracle), translation_norm(to_reference), rotation_angle_deg(to_reference));
     EXPECT_EQ(result.pairs, 59693u);
     EXPECT_LT(translation_norm(to_oracle), 0.05);
@@ -194,12 +196,12 @@ TEST(MappingRealData, Kitti07RelativePosesMatchTheGraph) {
     scans[i].pose_cm = i == 0 ? (*survey.truth_cm)[0] : (*survey.truth_cm)[i] * noise;
   }
   MappingSettings settings;
-  settings.backend = Backend::kCpu;
+  CpuBackend cpu;
   settings.mode = MatchingMode::kPairwise;
   settings.icp.max_pair_dist_cm = 100.0f;  // the scans are voxel-downsampled to about 20 cm,
-  settings.icp.refine_max_pair_dist_cm = 0.0f;  // so a 10 cm refinement would find few, biased pairs
+  settings.icp.refine_pair_dist_fraction = 0.0f;  // so a refinement would find few, biased pairs
   settings.icp.method = SearchMethod::kExact;
-  const auto result = map_survey(scans, settings);
+  const auto result = map_survey(scans, settings, cpu);
   ASSERT_TRUE(result.all_registered());
   const auto errors = pose_errors(poses_of(result), *survey.truth_cm);
   std::printf("kitti07: max relative error %.2f cm %.3f deg\n", errors.max_relative_translation_cm,

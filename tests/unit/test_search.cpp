@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 
+#include "minemap/backend/compute_backend.hpp"
 #include "minemap/search/kdtree.hpp"
 #include "minemap/search/pairing.hpp"
 #include "minemap/search/pairing_math.hpp"
@@ -23,15 +24,12 @@ double oracle_squared_distance(const std::vector<Eigen::Vector3f>& model, const 
   return best;
 }
 
-std::unique_ptr<PairingBackend> backend_named(const std::string& name) {
-  if (name == "cpu") return make_cpu_pairing_backend();
-  return make_pairing_backend(Backend::kOpenCl).backend;  // throws (test fails) without OpenCL
-}
+using test::backend_named;  // "opencl" throws (the test fails) without OpenCL
 
 class SearchTest : public ::testing::TestWithParam<std::string> {
  protected:
   void SetUp() override { backend_ = backend_named(GetParam()); }
-  std::unique_ptr<PairingBackend> backend_;
+  std::unique_ptr<ComputeBackend> backend_;
 };
 
 TEST_P(SearchTest, ExactMatchesBruteForceOracleOnRandomCloud) {
@@ -177,7 +175,7 @@ TEST_P(SearchTest, SumsMatchDoubleReferenceFarFromOrigin) {
   auto data = backend_->prepare(data_points, {});
   const ModelPlacement placement{model.get(), Pose::Identity()};
   const auto sums = backend_->pair_and_sum(*data, {&placement, 1}, SearchMethod::kExact, {25.f});
-  const auto pairs = make_cpu_pairing_backend()->nearest(*data, {&placement, 1}, SearchMethod::kExact, {25.f});
+  const auto pairs = make_cpu_backend()->nearest(*data, {&placement, 1}, SearchMethod::kExact, {25.f});
   PairSums reference;
   reference.reference_cm = sums.reference_cm;  // the reference the backend centred on
   double magnitude = 0.0;                      // sum of |p'|: the scale float round-off works at
@@ -216,8 +214,8 @@ TEST_P(SearchTest, SumsAreBitIdenticalRunToRun) {
 INSTANTIATE_TEST_SUITE_P(Backends, SearchTest, ::testing::Values("cpu", "opencl"));
 
 TEST(SearchBackends, CpuAndOpenClFindTheSameDistances) {
-  auto cpu = make_cpu_pairing_backend();
-  auto device = make_pairing_backend(Backend::kOpenCl).backend;
+  auto cpu = make_cpu_backend();
+  auto device = test::opencl_backend();
   const auto model_points = random_cloud(20000, -1000.f, 1000.f, 12);
   const auto query_points = random_cloud(10000, -1000.f, 1000.f, 13);
   Pose placement_pose = euler_to_pose({Eigen::Vector3d(12.0, -7.0, 30.0), Eigen::Vector3d(1.0, -2.0, 3.0)});

@@ -17,10 +17,11 @@
 #include <string>
 #include <vector>
 
+#include "minemap/backend/cpu_backend.hpp"
+#include "minemap/backend/make_backend.hpp"
 #include "minemap/filter/slice_filter.hpp"
-#include "minemap/opencl/opencl_backend.hpp"
 #include "minemap/sim/mine_simulator.hpp"
-#include "minemap/search/pairing.hpp"
+#include "minemap/slam/survey_matching.hpp"
 #include "test_support.hpp"
 
 namespace minemap {
@@ -72,12 +73,15 @@ AgreementLog& agreement() {
   return log;
 }
 
+/// The OpenCL backend, made once. No OpenCL device is a failure of the test, never a skip
+/// (OPENCL.md section 3.5): test::opencl_backend throws.
+ComputeBackend& opencl() {
+  static const std::unique_ptr<ComputeBackend> backend = test::opencl_backend();
+  return *backend;
+}
+
 SliceFilterResult run_opencl(const Scan& scan, const SliceFilterSettings& settings) {
-  std::string why_not;
-  auto result = opencl::filter_scan_opencl(scan, settings, /*allow_cpu_device=*/true, &why_not);
-  // No OpenCL device is a failure of the test, never a skip (OPENCL.md section 3.5).
-  if (!result) throw std::runtime_error("OpenCL slice filter unavailable: " + why_not);
-  return std::move(*result);
+  return opencl().filter_slices(scan, settings);
 }
 
 /// Runs the CPU reference and the OpenCL kernel, requires identical bits, returns the CPU result.
@@ -671,11 +675,10 @@ TEST(SliceFilterSlices, ScanWithoutSlicesIsReturnedUnchangedWithANote) {
   Scan scan;
   scan.name = "unstructured";
   scan.points_cm = test::random_cloud(500, -300.f, 300.f, 7);
-  for (Backend backend : {Backend::kCpu, Backend::kOpenCl, Backend::kAuto}) {
-    std::string note;
-    const auto r = filter_scan(scan, SliceFilterSettings{}, backend, &note);
-    EXPECT_NE(note.find("no slice structure"), std::string::npos) << note;
-    EXPECT_NE(note.find("unstructured"), std::string::npos) << note;
+  CpuBackend cpu_backend;
+  for (ComputeBackend* backend : {static_cast<ComputeBackend*>(&cpu_backend), &opencl()}) {
+    const auto r = backend->filter_slices(scan, SliceFilterSettings{});
+    EXPECT_EQ(r.backend, backend->name());
     EXPECT_EQ(r.points_cm, scan.points_cm);
     EXPECT_EQ(r.slice_offsets, (std::vector<std::uint32_t>{0, 500}));
     EXPECT_EQ(r.points_in, 500u);
@@ -692,27 +695,33 @@ TEST(SliceFilterSlices, ScanWithoutSlicesIsReturnedUnchangedWithANote) {
   const auto thinned = thin_unstructured(scan, 3);
   ASSERT_EQ(thinned.size(), 167u);
   for (std::size_t i = 0; i < thinned.size(); ++i) EXPECT_EQ(thinned[i], scan.points_cm[3 * i]);
+  // Mapping says so, once: the note names what was skipped.
+  Scan second = scan;
+  second.name = "unstructured2";
+  const auto mapped = map_survey({scan, second}, MappingSettings{}, cpu_backend);
+  std::string notes;
+  for (const auto& note : mapped.notes) notes += note + "\n";
+  EXPECT_NE(notes.find("without slice structure: slice filter skipped"), std::string::npos) << notes;
+  EXPECT_EQ(mapped.notes.size(), 1u) << notes;
 }
 
 TEST(SliceFilterDispatch, UsesTheRequestedBackend) {
   const Scan scan = make_scan({smooth_wall_slice(0.1, 0.0), smooth_wall_slice(0.2, 0.5)}, "dispatch");
-  std::string note;
-  const auto gpu = filter_scan(scan, SliceFilterSettings{}, Backend::kOpenCl, &note);
-  EXPECT_EQ(gpu.backend, "opencl") << note;
-  EXPECT_TRUE(note.empty()) << note;
-  const auto cpu = filter_scan(scan, SliceFilterSettings{}, Backend::kCpu, &note);
+  const auto gpu = opencl().filter_slices(scan, SliceFilterSettings{});
+  EXPECT_EQ(gpu.backend, "opencl");
+  const auto cpu = make_cpu_backend()->filter_slices(scan, SliceFilterSettings{});
   EXPECT_EQ(cpu.backend, "cpu");
-  EXPECT_TRUE(note.empty()) << note;
   EXPECT_EQ(cpu.points_cm, gpu.points_cm);
   EXPECT_EQ(cpu.slice_offsets, gpu.slice_offsets);
-  // Auto: OpenCL only on a GPU; on a machine with PoCL alone the CPU path, saying why.
-  note.clear();
-  const auto automatic = filter_scan(scan, SliceFilterSettings{}, Backend::kAuto, &note);
+  // Auto: OpenCL only on a GPU; on a machine with PoCL alone the CPU backend, saying why.
+  const BackendChoice choice = make_backend(backend_options_from_environment(Backend::kAuto));
+  const std::string& note = choice.message;
+  const auto automatic = choice.backend->filter_slices(scan, SliceFilterSettings{});
   if (automatic.backend == "cpu") {
-    EXPECT_NE(note.find("slice filter on the CPU"), std::string::npos) << note;
+    EXPECT_NE(note.find("CPU backend (TBB): "), std::string::npos) << note;
   } else {
     EXPECT_EQ(automatic.backend, "opencl");
-    EXPECT_TRUE(note.empty()) << note;
+    EXPECT_EQ(note.rfind("OpenCL backend: ", 0), 0u) << note;
   }
   EXPECT_EQ(automatic.points_cm, cpu.points_cm);
 }
@@ -743,11 +752,10 @@ TEST(SliceFilterSettingsTest, InvalidSettingsThrow) {
   for (const auto& [what, s] : cases) {
     EXPECT_THROW(s.validate(), std::invalid_argument) << what;
     EXPECT_THROW(filter_scan_cpu(scan, s), std::invalid_argument) << what;
-    EXPECT_THROW(filter_scan(scan, s, Backend::kCpu), std::invalid_argument) << what;
-    EXPECT_THROW(filter_scan(scan, s, Backend::kOpenCl), std::invalid_argument) << what;
-    EXPECT_THROW(filter_scan(unstructured, s, Backend::kCpu), std::invalid_argument) << what;
-    std::string why;
-    EXPECT_THROW(opencl::filter_scan_opencl(scan, s, true, &why), std::invalid_argument) << what;
+    EXPECT_THROW(make_cpu_backend()->filter_slices(scan, s), std::invalid_argument) << what;
+    EXPECT_THROW(opencl().filter_slices(scan, s), std::invalid_argument) << what;
+    EXPECT_THROW(make_cpu_backend()->filter_slices(unstructured, s), std::invalid_argument) << what;
+    EXPECT_THROW(opencl().filter_slices(unstructured, s), std::invalid_argument) << what;
   }
   // The limits themselves are valid.
   for (int w : {1, 3, 31}) {

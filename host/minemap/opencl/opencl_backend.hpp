@@ -1,29 +1,35 @@
 #pragma once
-// The OpenCL entry points seen by the rest of minemap. This header includes no OpenCL headers:
-// only files under host/ do, so src/ compiles without them.
+// The OpenCL compute backend (target minemap::opencl, built where CMake finds OpenCL; internal:
+// users reach it through make_backend, minemap/backend/make_backend.hpp, where its options are).
+// This header includes no OpenCL header: only the .cpp files of this folder do.
+//
+// Device choice: OpenClOptions::device (a substring of "platform / device", case-insensitive)
+// wins; otherwise the first available GPU, preferring a discrete one (no host-unified memory) with
+// the most compute units; otherwise, where allowed, a CPU device (PoCL).
+//
+// Faults. Every OpenCL call goes through the C++ bindings with exceptions on, so a failing status
+// becomes cl::Error, which the backend turns into a BackendError naming the call and the status:
+//   * no platform, no device, kernel build failure (setup): make_opencl_backend throws; make_backend
+//     (host/minemap/backend/make_backend.hpp) then picks the CPU for `auto` and fails for `opencl`.
+//   * a failing launch, allocation or transfer once mapping has begun: map_survey matches the whole
+//     survey again on a fresh CPU backend, with one note, so the poses are the CPU run's.
+// OpenClOptions::fault makes one fault happen through the path a real one takes (tests):
+//   build       the compiler gets the kernel source with an invalid declaration appended, so the
+//               real clBuildProgram fails (CL_BUILD_PROGRAM_FAILURE) and its build log is reported;
+//   launch:N    the N-th kernel launch of this backend (search, reduction or slice filter; N >= 1)
+//   N           fails as if clEnqueueNDRangeKernel returned CL_OUT_OF_RESOURCES;
+//   alloc:N     the N-th device buffer this backend creates fails as if clCreateBuffer returned
+//               CL_MEM_OBJECT_ALLOCATION_FAILURE (device memory exhausted).
 #include <memory>
-#include <optional>
 #include <string>
 
-#include "minemap/filter/slice_filter.hpp"
-#include "minemap/search/pairing.hpp"
+#include "minemap/backend/make_backend.hpp"
 
 namespace minemap::opencl {
 
-/// Creates the OpenCL pairing backend, or returns nullptr with the reason in `why_not` (no platform,
-/// no device, kernel build failure, ...). Later device failures throw DeviceError (a BackendError).
-/// `allow_cpu_device`: accept a CPU OpenCL device (PoCL) when no GPU is found; `auto` mode passes
-/// false because TBB beats PoCL on the same cores.
-std::unique_ptr<PairingBackend> make_opencl_pairing_backend(bool allow_cpu_device, std::string* why_not);
-
-/// Runs the slice filter on the OpenCL device. Returns nullopt with the reason in `why_not` when
-/// no device is usable (the caller uses the CPU). A device that fails during the run (allocation,
-/// launch, transfer) throws DeviceError, a BackendError: map_survey then matches the whole survey
-/// on the CPU. Faults and the injection hook MINEMAP_OPENCL_INJECT_FAULT: runtime.hpp.
-std::optional<SliceFilterResult> filter_scan_opencl(const Scan& scan, const SliceFilterSettings& settings,
-                                                    bool allow_cpu_device, std::string* why_not);
-
-/// One line naming platform, device and driver of the device minemap would use, or why none.
-std::string describe_device(bool allow_cpu_device);
+/// The OpenCL backend on the device `options` choose: its context, queue, compiled kernels and
+/// scratch buffers are its own (two backends share nothing). Throws BackendError saying why when
+/// no device fits or the kernels do not build.
+std::unique_ptr<ComputeBackend> make_opencl_backend(const OpenClOptions& options);
 
 }  // namespace minemap::opencl

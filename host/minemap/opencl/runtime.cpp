@@ -2,7 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
-#include <cstdlib>
+#include <tuple>
 #include <sstream>
 #include <vector>
 
@@ -78,39 +78,32 @@ std::vector<Candidate> list_devices() {
   return candidates;
 }
 
-/// The best device for minemap, or nullptr-equivalent (empty label) with the reason.
-Candidate pick_device(std::string* why_not) {
-  const char* disabled = std::getenv("MINEMAP_OPENCL");
-  if (disabled && lower(disabled) == "off") {
-    *why_not = "OpenCL disabled by MINEMAP_OPENCL=off";
-    return {};
-  }
+/// The device `options` choose; throws DeviceError saying why none fits.
+Candidate pick_device(const OpenClOptions& options) {
   std::vector<Candidate> candidates;
   try {
     candidates = list_devices();
   } catch (const cl::Error& e) {
     if (e.err() == CL_PLATFORM_NOT_FOUND_KHR) {
-      *why_not = std::string("no OpenCL platform found (") + e.what() + ": " + error_name(e.err()) +
-                 "); install an ICD such as pocl-opencl-icd or a GPU driver";
-    } else {
-      *why_not = std::string("listing the OpenCL devices failed (") + e.what() + ": " + error_name(e.err()) + ")";
+      throw DeviceError(std::string("no OpenCL platform found (") + e.what() + ": " + error_name(e.err()) +
+                        "); install an ICD such as pocl-opencl-icd or a GPU driver");
     }
-    return {};
+    throw DeviceError(std::string("listing the OpenCL devices failed (") + e.what() + ": " + error_name(e.err()) + ")");
   }
-  if (candidates.empty()) {
-    *why_not = "no available OpenCL device with a compiler";
-    return {};
-  }
-  if (const char* wanted = std::getenv("MINEMAP_OPENCL_DEVICE"); wanted && *wanted) {
+  if (candidates.empty()) throw DeviceError("no available OpenCL device with a compiler");
+  if (!options.device.empty()) {
     for (auto& c : candidates) {
-      if (lower(c.label).find(lower(wanted)) != std::string::npos) return c;
+      if (lower(c.label).find(lower(options.device)) != std::string::npos) return c;
     }
-    *why_not = std::string("MINEMAP_OPENCL_DEVICE='") + wanted + "' matches no device";
-    return {};
+    throw DeviceError("OpenCL device '" + options.device + "' matches no device");
   }
   auto rank = [](const Candidate& c) { return std::make_tuple(c.is_gpu, c.discrete, c.compute_units); };
-  return *std::max_element(candidates.begin(), candidates.end(),
-                           [&](const Candidate& a, const Candidate& b) { return rank(a) < rank(b); });
+  const Candidate best = *std::max_element(candidates.begin(), candidates.end(),
+                                           [&](const Candidate& a, const Candidate& b) { return rank(a) < rank(b); });
+  if (!best.is_gpu && !options.allow_cpu_device) {
+    throw DeviceError("no OpenCL GPU found (only " + best.label + "; use --backend opencl to run on it)");
+  }
+  return best;
 }
 
 }  // namespace
@@ -148,7 +141,8 @@ void rethrow_as_device_error(const std::string& what) {
   }
 }
 
-Runtime::Runtime(cl::Device device, bool is_gpu) : device_(std::move(device)), is_gpu_(is_gpu) {
+Runtime::Runtime(cl::Device device, bool is_gpu, const OpenClOptions& options)
+    : device_(std::move(device)), is_gpu_(is_gpu), fault_(options.fault) {
   try {
     context_ = cl::Context(device_);
     queue_ = cl::CommandQueue(context_, device_);
@@ -156,111 +150,39 @@ Runtime::Runtime(cl::Device device, bool is_gpu) : device_(std::move(device)), i
     description_ = platform.getInfo<CL_PLATFORM_NAME>() + " / " + device_.getInfo<CL_DEVICE_NAME>() + " (driver " +
                    device_.getInfo<CL_DRIVER_VERSION>() + ", " + device_.getInfo<CL_DEVICE_VERSION>() + ")";
     max_alloc_bytes_ = device_.getInfo<CL_DEVICE_MAX_MEM_ALLOC_SIZE>();
-    std::string options = "-cl-std=CL1.2";
+    std::string build_options = "-cl-std=CL1.2";
     // Correctly rounded division and sqrt make the filter's means and ranges equal the CPU's bits.
     if (device_.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>() & CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT) {
-      options += " -cl-fp32-correctly-rounded-divide-sqrt";
+      build_options += " -cl-fp32-correctly-rounded-divide-sqrt";
     }
-    has_fp64_ = device_.getInfo<CL_DEVICE_EXTENSIONS>().find("cl_khr_fp64") != std::string::npos;
-    // MINEMAP_OPENCL_FP64=off takes the float-sum path a device without double precision takes
-    // (tests run it on PoCL, whose device has double precision).
-    if (const char* fp64 = std::getenv("MINEMAP_OPENCL_FP64"); fp64 != nullptr && std::string(fp64) == "off") {
-      has_fp64_ = false;
-    }
-    if (has_fp64_) options += " -DMM_HAVE_FP64=1";
-    const InjectedFault fault = InjectedFault::from_environment();
-    fault_kind_ = fault.kind;
-    fault_at_ = fault.at;
-    const bool broken = fault.kind == InjectedFault::Kind::kBuild;
+    // Without fp64 (or with it turned off) the sums take the float path of pair_sums.
+    has_fp64_ = options.fp64 && device_.getInfo<CL_DEVICE_EXTENSIONS>().find("cl_khr_fp64") != std::string::npos;
+    if (has_fp64_) build_options += " -DMM_HAVE_FP64=1";
+    const bool broken = fault_.kind == InjectedFault::Kind::kBuild;
     program_ = cl::Program(context_, kernel_source() + (broken ? kInjectedBuildFault : ""));
-    program_.build({device_}, options.c_str());
+    program_.build({device_}, build_options.c_str());
   } catch (...) {
     rethrow_as_device_error("OpenCL setup on " + (description_.empty() ? std::string("device") : description_));
   }
 }
 
-InjectedFault InjectedFault::parse(const char* text) {
-  InjectedFault fault;
-  if (text == nullptr || *text == '\0') return fault;
-  const std::string value = lower(text);
-  std::string count = value;
-  if (value == "build") {
-    fault.kind = Kind::kBuild;
-    return fault;
-  }
-  if (value.rfind("launch:", 0) == 0) {
-    fault.kind = Kind::kLaunch;
-    count = value.substr(7);
-  } else if (value.rfind("alloc:", 0) == 0) {
-    fault.kind = Kind::kAlloc;
-    count = value.substr(6);
-  } else {
-    fault.kind = Kind::kLaunch;  // a plain number: the launch fault, as first defined
-  }
-  const bool digits = !count.empty() && count.size() <= 9 &&
-                      std::all_of(count.begin(), count.end(), [](unsigned char c) { return std::isdigit(c) != 0; });
-  fault.at = digits ? std::stol(count) : 0;
-  if (fault.at < 1) {
-    throw DeviceError(std::string("MINEMAP_OPENCL_INJECT_FAULT='") + text +
-                      "' is not understood (expected build, launch:N, alloc:N or N, with N >= 1)");
-  }
-  return fault;
-}
-
-InjectedFault InjectedFault::from_environment() { return parse(std::getenv("MINEMAP_OPENCL_INJECT_FAULT")); }
-
-void Runtime::rearm_fault_injection() {
-  const InjectedFault fault = InjectedFault::from_environment();
-  fault_kind_ = fault.kind;
-  fault_at_ = fault.at;
-  launches_ = 0;
-  allocations_ = 0;
+std::shared_ptr<Runtime> Runtime::create(const OpenClOptions& options) {
+  const Candidate c = pick_device(options);
+  return std::make_shared<Runtime>(c.device, c.is_gpu, options);
 }
 
 cl::Buffer Runtime::buffer(cl_mem_flags flags, std::size_t bytes, void* host) {
-  if (fault_kind_ == InjectedFault::Kind::kAlloc && ++allocations_ == fault_at_) {
+  if (fault_.kind == InjectedFault::Kind::kAlloc && ++allocations_ == fault_.at) {
     throw cl::Error(CL_MEM_OBJECT_ALLOCATION_FAILURE, "clCreateBuffer (injected by MINEMAP_OPENCL_INJECT_FAULT)");
   }
   return cl::Buffer(context_, flags, bytes, host);
 }
 
 void Runtime::launch(const cl::Kernel& kernel, std::size_t global, std::size_t local) {
-  if (fault_kind_ == InjectedFault::Kind::kLaunch && ++launches_ == fault_at_) {
+  if (fault_.kind == InjectedFault::Kind::kLaunch && ++launches_ == fault_.at) {
     throw cl::Error(CL_OUT_OF_RESOURCES, "clEnqueueNDRangeKernel (injected by MINEMAP_OPENCL_INJECT_FAULT)");
   }
   queue_.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(global), cl::NDRange(local));
-}
-
-std::shared_ptr<Runtime> Runtime::get(bool allow_cpu_device, std::string* why_not) {
-  static std::mutex mutex;
-  static std::shared_ptr<Runtime> runtime;
-  static std::string failure;
-  static bool tried = false;
-  static bool picked_gpu = false;
-  static bool explicitly_named = false;
-  std::lock_guard lock(mutex);
-  if (!tried) {
-    tried = true;
-    Candidate c = pick_device(&failure);
-    if (c.device()) {
-      picked_gpu = c.is_gpu;
-      explicitly_named = std::getenv("MINEMAP_OPENCL_DEVICE") != nullptr;
-      try {
-        runtime = std::make_shared<Runtime>(c.device, c.is_gpu);
-      } catch (const std::exception& e) {
-        failure = e.what();
-      }
-    }
-  }
-  if (!runtime) {
-    if (why_not) *why_not = failure;
-    return nullptr;
-  }
-  if (!allow_cpu_device && !picked_gpu && !explicitly_named) {
-    if (why_not) *why_not = "no OpenCL GPU found (only " + runtime->description() + "; use --backend opencl to run on it)";
-    return nullptr;
-  }
-  return runtime;
 }
 
 std::size_t Runtime::work_group_size(const cl::Kernel& kernel, std::size_t wanted) const {
@@ -269,12 +191,6 @@ std::size_t Runtime::work_group_size(const cl::Kernel& kernel, std::size_t wante
   std::size_t size = 1;
   while (size * 2 <= std::min(limit, wanted)) size *= 2;
   return size;
-}
-
-std::string describe_device(bool allow_cpu_device) {
-  std::string why;
-  auto runtime = Runtime::get(allow_cpu_device, &why);
-  return runtime ? runtime->description() : "none: " + why;
 }
 
 }  // namespace minemap::opencl

@@ -12,13 +12,15 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <map>
 
+#include "minemap/backend/make_backend.hpp"
+#include "minemap/cli/exit_codes.hpp"
 #include "minemap/core/atomic_file.hpp"
 #include "minemap/core/error.hpp"
 #include "minemap/io/formats.hpp"
-#include "minemap/search/pairing.hpp"
+#include "minemap/report/map_output.hpp"
 #include "minemap/sim/mine_simulator.hpp"
-#include "minemap/slam/map_output.hpp"
 #include "minemap/slam/survey_matching.hpp"
 
 namespace {
@@ -59,32 +61,16 @@ struct SimulateOptions {
   std::uint32_t seed = 1;
 };
 
+/// What `map` takes beyond MappingSettings (which the options bind to directly: its defaults are
+/// the ones --help shows, and a library user gets the same).
 struct MapOptions {
   fs::path survey;
   fs::path out;
-  std::string mode = "simultaneous";
-  std::string search = "apx";
-  std::string backend = "auto";
+  minemap::Backend backend = minemap::Backend::kAuto;
   bool no_filter = false;
-  float max_pair_dist_cm = 25.0f;
-  float refine_pair_dist_cm = -1.0f;  // < 0: 0.4 x max_pair_dist_cm (10 cm for the default 25 cm)
-  int max_iterations = 100;
-  double min_step_cm = minemap::IcpSettings{}.min_translation_step_cm;
-  double min_step_deg = minemap::IcpSettings{}.min_rotation_step_deg;
-  std::string unit;  // empty: the format's default
-  int bucket_size = 10;
-  int median_window = 7;
-  float outlier_threshold_cm = 200.0f;
-  float min_point_spacing_cm = 10.0f;
-  int slice_stride = 3;
-  int point_stride = 1;
   bool sparse_models = false;
   bool plain_icp = false;
-  int model_slice_stride = minemap::MappingSettings{}.model_slice_stride;
-  int min_overlap_pairs = 250;
-  double moved_translation_cm = minemap::MappingSettings{}.moved_translation_cm;
-  double moved_rotation_deg = minemap::MappingSettings{}.moved_rotation_deg;
-  int max_relaxation_matches = 0;
+  std::string unit;  // empty: the format's default
   std::uint32_t points_per_slice = 0;
   fs::path initial_poses;
   bool right_handed_to_3dtk = false;
@@ -137,34 +123,12 @@ void print_errors(const char* label, const minemap::PoseErrors& e, double unit_p
               e.path_length_cm * unit_per_cm, unit, e.max_translation_cm * unit_per_cm, unit, e.mean_rotation_deg);
 }
 
-int run_map(const MapOptions& options) {
+int run_map(const MapOptions& options, minemap::MappingSettings settings, const std::string& opencl_device) {
   using namespace minemap;
-  MappingSettings settings;
-  settings.mode = parse_matching_mode(options.mode);
-  settings.icp.method = parse_search_method(options.search);
-  settings.backend = parse_backend(options.backend);
-  settings.filter_enabled = !options.no_filter;
-  settings.icp.max_pair_dist_cm = options.max_pair_dist_cm;
-  settings.icp.max_iterations = options.max_iterations;
-  settings.icp.refine_max_pair_dist_cm =
-      options.refine_pair_dist_cm < 0.0f ? 0.4f * options.max_pair_dist_cm : options.refine_pair_dist_cm;
-  settings.icp.min_translation_step_cm = options.min_step_cm;
-  settings.icp.min_rotation_step_deg = options.min_step_deg;
-  settings.tree.bucket_size = options.bucket_size;
-  settings.filter.median_window = options.median_window;
-  settings.filter.outlier_threshold_cm = options.outlier_threshold_cm;
-  settings.filter.min_point_spacing_cm = options.min_point_spacing_cm;
-  settings.filter.slice_stride = options.slice_stride;
-  settings.dense_models = !options.sparse_models;
+  if (options.no_filter) settings.filter_enabled = false;
+  if (options.sparse_models) settings.dense_models = false;
   if (options.plain_icp) settings.icp.accelerate = false;
-  settings.model_slice_stride = options.model_slice_stride;
-  settings.unstructured_point_stride = options.point_stride;
-  settings.min_overlap_pairs = options.min_overlap_pairs;
-  settings.moved_translation_cm = options.moved_translation_cm;
-  settings.moved_rotation_deg = options.moved_rotation_deg;
-  settings.max_relaxation_matches_per_scan = options.max_relaxation_matches;
-  settings.icp.min_pairs = std::min(settings.icp.min_pairs, options.min_overlap_pairs);
-  settings.filter.validate();
+  settings.validate();
 
   io::SurveyReadSettings read;
   if (!options.unit.empty()) read.read.unit = parse_length_unit(options.unit);
@@ -186,14 +150,19 @@ int run_map(const MapOptions& options) {
     }
   }
 
+  // The composition root: the backend is made here, from the options and the environment.
+  BackendOptions backend_options = backend_options_from_environment(options.backend);
+  if (!opencl_device.empty()) backend_options.opencl.device = opencl_device;
+  BackendChoice choice = make_backend(backend_options);
+  if (!options.quiet) std::printf("backend: %s\n", choice.message.c_str());
+
   ProgressBar bar(!options.quiet);
-  const MappingResult result = map_survey(survey.scans, settings, [&](std::size_t done, std::size_t total,
-                                                                       const std::string& phase) {
-    if (g_interrupted) throw Interrupted{};  // nothing has been written yet: stop here
-    bar(done, total, phase);
-  });
+  const MappingResult result =
+      map_survey(survey.scans, settings, *choice.backend, [&](std::size_t done, std::size_t total, const std::string& phase) {
+        if (g_interrupted) throw Interrupted{};  // nothing has been written yet: stop here
+        bar(done, total, phase);
+      });
   if (!options.quiet) {
-    std::printf("backend: %s\n", result.backend_note.c_str());
     for (const auto& note : result.notes) std::printf("note: %s\n", note.c_str());
   }
 
@@ -222,6 +191,7 @@ int run_map(const MapOptions& options) {
   output.up_axis = (survey.format == "uos" || options.right_handed_to_3dtk) ? 1 : 2;
   output.title = "minemap " + std::string(to_string(settings.mode)) + ": " + options.survey.filename().string();
   output.load_s = load_s;
+  output.backend_choice = choice.message;
   {
     const SignalsBlocked no_interrupts_while_writing;
     write_map_outputs(options.out, result, survey.truth_cm, settings, output);
@@ -273,43 +243,65 @@ int main(int argc, char** argv) {
   simulate->add_option("--seed", sim.seed, "Random seed");
 
   MapOptions map;
+  minemap::MappingSettings mapping;  // the library's defaults, shown by --help
+  minemap::SliceFilterSettings& filter = mapping.filter;
+  minemap::IcpSettings& icp = mapping.icp;
   auto* map_cmd = app.add_subcommand("map", "Register a survey into one consistent map");
   map_cmd->add_option("survey", map.survey, "Survey folder (uos, pcd, ply or kitti layout)")->required();
   map_cmd->add_option("--out", map.out, "Output folder")->required();
   add_threads(map_cmd);
   add_opencl_device(map_cmd);
-  map_cmd->add_option("--mode", map.mode, "pairwise | incremental | simultaneous")->capture_default_str();
-  map_cmd->add_option("--search", map.search, "kd (exact) | apx (approximate, then exact) | brute")->capture_default_str();
-  map_cmd->add_option("--backend", map.backend, "auto | cpu | opencl")->capture_default_str();
+  map_cmd->add_option("--mode", mapping.mode, "pairwise | incremental | simultaneous")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, minemap::MatchingMode>{
+          {"pairwise", minemap::MatchingMode::kPairwise},
+          {"incremental", minemap::MatchingMode::kIncremental},
+          {"simultaneous", minemap::MatchingMode::kSimultaneous}}))
+      ->default_str(minemap::to_string(mapping.mode));
+  map_cmd->add_option("--search", icp.method, "kd (exact) | apx (approximate, then exact) | brute")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, minemap::SearchMethod>{
+          {"kd", minemap::SearchMethod::kExact},
+          {"apx", minemap::SearchMethod::kApproximate},
+          {"brute", minemap::SearchMethod::kBruteForce}}))
+      ->default_str(minemap::to_string(icp.method));
+  map_cmd->add_option("--backend", map.backend, "auto | cpu | opencl")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, minemap::Backend>{
+          {"auto", minemap::Backend::kAuto}, {"cpu", minemap::Backend::kCpu}, {"opencl", minemap::Backend::kOpenCl}}))
+      ->default_str(minemap::to_string(map.backend));
   map_cmd->add_flag("--no-filter", map.no_filter, "Skip the slice filter (median + reduction + every 3rd slice)");
-  map_cmd->add_option("--max-pair-dist-cm", map.max_pair_dist_cm, "Maximum point-pair distance")->capture_default_str();
-  map_cmd->add_option("--refine-pair-dist-cm", map.refine_pair_dist_cm,
-                      "After converging, refine with this tighter pair bound (0 = off; default 0.4 x the pair bound)");
-  map_cmd->add_option("--max-iterations", map.max_iterations, "ICP iteration cap")->capture_default_str();
-  map_cmd->add_option("--min-step-cm", map.min_step_cm, "ICP converged: a step moves less than this...")
+  map_cmd->add_option("--max-pair-dist-cm", icp.max_pair_dist_cm, "Maximum point-pair distance")->capture_default_str();
+  map_cmd->add_option("--refine-fraction", icp.refine_pair_dist_fraction,
+                      "After converging, refine at this fraction of the pair bound (0 = off)")
       ->capture_default_str();
-  map_cmd->add_option("--min-step-deg", map.min_step_deg, "...and turns less than this")->capture_default_str();
+  map_cmd->add_option("--max-iterations", icp.termination.max_iterations, "ICP iteration cap")->capture_default_str();
+  map_cmd->add_option("--min-step-cm", icp.termination.min_translation_step_cm,
+                      "ICP converged: a step moves less than this...")
+      ->capture_default_str();
+  map_cmd->add_option("--min-step-deg", icp.termination.min_rotation_step_deg, "...and turns less than this")
+      ->capture_default_str();
   map_cmd->add_option("--unit", map.unit, "Unit of the survey files: m or cm (default: cm for uos, m otherwise)");
-  map_cmd->add_option("--bucket-size", map.bucket_size, "kd-tree bucket size")->capture_default_str();
-  map_cmd->add_option("--median-window", map.median_window, "Median filter window (points)")->capture_default_str();
-  map_cmd->add_option("--outlier-threshold-cm", map.outlier_threshold_cm, "Median filter threshold")->capture_default_str();
-  map_cmd->add_option("--min-point-spacing-cm", map.min_point_spacing_cm, "Reduction spacing")->capture_default_str();
-  map_cmd->add_option("--slice-stride", map.slice_stride, "Keep every n-th slice")->capture_default_str();
-  map_cmd->add_option("--model-slice-stride", map.model_slice_stride,
+  map_cmd->add_option("--bucket-size", mapping.tree.bucket_size, "kd-tree bucket size")->capture_default_str();
+  map_cmd->add_option("--median-window", filter.median_window, "Median filter window (points)")->capture_default_str();
+  map_cmd->add_option("--outlier-threshold-cm", filter.outlier_threshold_cm, "Median filter threshold")
+      ->capture_default_str();
+  map_cmd->add_option("--min-point-spacing-cm", filter.min_point_spacing_cm, "Reduction spacing")->capture_default_str();
+  map_cmd->add_option("--slice-stride", filter.slice_stride, "Keep every n-th slice")->capture_default_str();
+  map_cmd->add_option("--model-slice-stride", mapping.model_slice_stride,
                       "Scans matched against keep every n-th slice (denser than the data: less bias)")
       ->capture_default_str();
   map_cmd->add_flag("--sparse-models", map.sparse_models,
                     "Match against clouds reduced like the data, as the paper does (faster, less accurate)");
   map_cmd->add_flag("--plain-icp", map.plain_icp,
                     "ICP as in the paper, without Anderson acceleration (the default accelerates: fewer iterations)");
-  map_cmd->add_option("--point-stride", map.point_stride, "Scans without slices: keep every n-th point")->capture_default_str();
-  map_cmd->add_option("--min-overlap-pairs", map.min_overlap_pairs, "Overlap threshold (pairs)")->capture_default_str();
-  map_cmd->add_option("--moved-translation-cm", map.moved_translation_cm,
+  map_cmd->add_option("--point-stride", mapping.unstructured_point_stride, "Scans without slices: keep every n-th point")
+      ->capture_default_str();
+  map_cmd->add_option("--min-overlap-pairs", mapping.min_overlap_pairs, "Overlap threshold (pairs)")
+      ->capture_default_str();
+  map_cmd->add_option("--moved-translation-cm", mapping.moved_translation_cm,
                       "Relaxation: a match that moves a scan more than this re-queues its neighbours")
       ->capture_default_str();
-  map_cmd->add_option("--moved-rotation-deg", map.moved_rotation_deg, "...or turns it more than this")
+  map_cmd->add_option("--moved-rotation-deg", mapping.moved_rotation_deg, "...or turns it more than this")
       ->capture_default_str();
-  map_cmd->add_option("--max-relaxation-matches", map.max_relaxation_matches,
+  map_cmd->add_option("--max-relaxation-matches", mapping.max_relaxation_matches_per_scan,
                       "Cap on relaxation matches after each new scan (0 = 4 x scans so far)");
   map_cmd->add_option("--points-per-slice", map.points_per_slice, "uos files without slice markers: points per slice");
   map_cmd->add_option("--initial-poses", map.initial_poses, "Initial poses (TUM, KITTI, 4x4 or graph file)");
@@ -328,14 +320,12 @@ int main(int argc, char** argv) {
     std::signal(SIGINT, on_interrupt);
     std::signal(SIGTERM, on_interrupt);
   }
-  // The runtime reads the choice from the environment when it first starts, so the flag sets it.
-  if (!opencl_device.empty()) ::setenv("MINEMAP_OPENCL_DEVICE", opencl_device.c_str(), 1);
   try {
     const int max_threads = tbb::info::default_concurrency();
     tbb::task_arena arena(threads > 0 ? std::min(threads, max_threads) : max_threads);
     return arena.execute([&] {
       if (*simulate) return run_simulate(sim);
-      return run_map(map);
+      return run_map(map, mapping, opencl_device);
     });
   } catch (const Interrupted&) {
     if (*map_cmd) minemap::remove_stale_temp_files(map.out);

@@ -1,25 +1,22 @@
-// The dispatch point of the slice filter between the CPU reference and the OpenCL kernel.
+// The slice filter's settings check: the one place its limits are stated.
 #include "minemap/filter/slice_filter.hpp"
 
-#include "minemap/opencl/opencl_backend.hpp"
-#include "minemap/search/pairing.hpp"
+#include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace minemap {
 
-SliceFilterResult filter_scan(const Scan& scan, const SliceFilterSettings& settings, Backend backend,
-                              std::string* note) {
-  settings.validate();
-  if (!scan.has_slices()) {
-    if (note) *note = "scan " + scan.name + " has no slice structure: slice filter skipped";
-    return filter_scan_cpu(scan, settings);
+void SliceFilterSettings::validate() const {
+  if (median_window < 1 || median_window > kMaxMedianWindow || median_window % 2 == 0) {
+    throw std::invalid_argument("median window must be odd and within 1.." + std::to_string(kMaxMedianWindow) +
+                                ", got " + std::to_string(median_window));
   }
-  if (backend != Backend::kCpu) {
-    std::string why_not;
-    auto result = opencl::filter_scan_opencl(scan, settings, backend == Backend::kOpenCl, &why_not);
-    if (result) return std::move(*result);
-    if (note) *note = "slice filter on the CPU: " + why_not;
+  if (!(outlier_threshold_cm >= 0.0f)) throw std::invalid_argument("outlier threshold must be >= 0 cm");
+  if (!(min_point_spacing_cm >= 0.0f) || !std::isfinite(min_point_spacing_cm)) {
+    throw std::invalid_argument("minimum point spacing must be a finite length >= 0 cm");
   }
-  return filter_scan_cpu(scan, settings);
+  if (slice_stride < 1) throw std::invalid_argument("slice stride must be >= 1");
 }
 
 }  // namespace minemap

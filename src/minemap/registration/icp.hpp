@@ -1,36 +1,63 @@
 #pragma once
-// ICP (paper, section IV.A): closest-point pairs, Horn's closed form, iterate. With the approximate
-// kd-tree the paper's schedule applies: approximate search while the error E(R, t) keeps falling,
-// then exact search until convergence (usually 1-3 more iterations).
+// ICP (paper, section IV.A): pair every data point with its closest model point, move the data by
+// Horn's closed form (horn.hpp), repeat. register_icp runs the paper's schedule as phases:
+//   1. approximate kd-tree while the error E(R, t) keeps falling (SearchMethod::kApproximate only);
+//   2. exact search until the step is small (usually 1-3 more iterations after phase 1);
+//   3. optionally, exact search again at a tighter pair bound (refinement), until the step is small.
+// Anderson acceleration (AA-ICP), when on, wraps the exact phases with its own accept/reject test.
+// The objective is point-to-point (point_to_point.hpp); the search and the sums run in the backend.
 #include <span>
 #include <string>
 
+#include "minemap/backend/compute_backend.hpp"
 #include "minemap/core/pose.hpp"
-#include "minemap/search/pairing.hpp"
 
 namespace minemap {
 
+/// When ICP stops: every stopping rule in one place.
+struct IcpTermination {
+  /// ICP iterations over all phases (each takes one pairing pass and, unless it is a rejected
+  /// acceleration, one Horn step); at the cap the last pose is returned (IcpStop::kMaxIterations).
+  int max_iterations = 100;
+  double min_translation_step_cm = 0.01;  ///< a phase has converged when one step moves less than this...
+  double min_rotation_step_deg = 0.001;   ///< ...and turns less than this
+  int min_pairs = 250;                    ///< fewer pairs: the clouds do not overlap, registration fails
+};
+
+/// ICP's settings. IcpSettings{} is the paper's ICP; mapping() is what map_survey uses by default.
 struct IcpSettings {
-  /// kExact: exact kd-tree only. kApproximate: the paper's schedule (approximate, then exact).
+  /// kApproximate: the paper's schedule (approximate, then exact). kExact: exact kd-tree only.
   /// kBruteForce: brute force only (the Table I baseline).
   SearchMethod method = SearchMethod::kApproximate;
-  float max_pair_dist_cm = 25.0f;          ///< 3DTK's default
-  /// After converging at max_pair_dist_cm, continue with exact search at this tighter bound until
+  float max_pair_dist_cm = 25.0f;  ///< 3DTK's default
+  /// After converging at max_pair_dist_cm, continue with exact search at this fraction of it until
   /// converged again (0 = off). Pairs up to 25 cm include wrong ones at occlusion edges, which bias
-  /// point-to-point ICP by about 1 cm per 4 m step in a mine; 10 cm removes most of that.
-  float refine_max_pair_dist_cm = 0.0f;
-  int max_iterations = 100;                ///< approximate and exact together
-  double min_translation_step_cm = 0.01;   ///< converged when one iteration moves less than this...
-  double min_rotation_step_deg = 0.001;    ///< ...and turns less than this
-  int min_pairs = 250;                     ///< fewer pairs: no overlap, registration fails
-  /// Anderson acceleration of the exact-search iterations (AA-ICP, Pavlov et al. 2018): the next
-  /// pose extrapolates the last acceleration_history plain ICP steps. Where point-to-point ICP creeps
+  /// point-to-point ICP by about 1 cm per 4 m step in a mine; 10 cm (0.4) removes most of that.
+  float refine_pair_dist_fraction = 0.0f;
+  IcpTermination termination;
+  /// Anderson acceleration of the exact phases (AA-ICP, Pavlov et al. 2018): the next pose
+  /// extrapolates the last acceleration_history plain ICP steps. Where point-to-point ICP creeps
   /// along a shallow valley (a rotation about a tunnel's axis), it reaches the valley's end in fewer
   /// iterations. A jump that does not lower ICP's objective (squared pair distances, the bound
   /// squared for unpaired points) is taken back and the plain step kept; that costs one pairing.
   /// Off: plain ICP, as in the paper.
   bool accelerate = false;
   int acceleration_history = 5;  ///< steps the extrapolation uses (AA-ICP's m)
+
+  /// The paper's ICP: approximate then exact search, 25 cm, plain steps.
+  static IcpSettings paper() { return {}; }
+  /// minemap's mapping default: the paper's schedule, then a refinement at 10 cm (0.4 x 25 cm),
+  /// Anderson-accelerated (docs/benchmarks.md has the figures behind both).
+  static IcpSettings mapping() {
+    IcpSettings settings;
+    settings.refine_pair_dist_fraction = 0.4f;
+    settings.accelerate = true;
+    return settings;
+  }
+  /// The refinement's pair bound in cm (0 when off).
+  float refine_max_pair_dist_cm() const { return refine_pair_dist_fraction * max_pair_dist_cm; }
+  /// Throws std::invalid_argument naming the bad setting.
+  void validate() const;
 };
 
 enum class IcpStop {
@@ -46,7 +73,7 @@ struct IcpResult {
   Pose world_from_data = Pose::Identity();  ///< T_world_points of the data cloud
   int approximate_iterations = 0;
   int exact_iterations = 0;       ///< includes the refinement at the tighter bound
-  int refine_iterations = 0;      ///< of which at refine_max_pair_dist_cm
+  int refine_iterations = 0;      ///< of which at the refinement's bound
   int accelerations = 0;          ///< accelerated poses kept (IcpSettings::accelerate)
   int rejected_accelerations = 0; ///< taken back because the objective rose (each cost one pairing, counted in exact_iterations)
   std::size_t pairs = 0;  ///< pairs in the last iteration
@@ -63,12 +90,13 @@ struct WorldModel {
   Pose world_from_model = Pose::Identity();
 };
 
-/// Registers `data` (initially at `world_from_data`) against the union of `models`.
-IcpResult register_icp(PairingBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
+/// Registers `data` (initially at `world_from_data`) against the union of `models`. The clouds
+/// must come from `backend`. `settings` are not checked here (IcpSettings::validate).
+IcpResult register_icp(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
                        std::span<const WorldModel> models, const IcpSettings& settings);
 
 /// Pairs between `data` and one model at the given poses (exact search): the paper's overlap test.
-std::size_t count_pairs(PairingBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
+std::size_t count_pairs(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
                         const WorldModel& model, float max_pair_dist_cm);
 
 }  // namespace minemap

@@ -12,6 +12,8 @@
 #include <span>
 #include <vector>
 
+#include "minemap/shared/minemap_shared.h"
+
 namespace minemap {
 
 struct KdTreeSettings {
@@ -75,9 +77,8 @@ class KdTree {
   int depth_ = 0;
 };
 
-/// The deepest traversal stack any search may need (depth of a tree over 2^31 points with equal
-/// halves is bounded by the float mantissa: a cut can halve an extent at most ~150 times before
-/// halves become equal floats; the builder stops cutting there).
-inline constexpr int kMaxKdDepth = 64;
+/// The deepest tree the builder makes, and so the traversal stack every search (C++ and kernels)
+/// holds: the builder stops cutting at this depth (a bucket then holds more than bucket_size points).
+inline constexpr int kMaxKdDepth = MM_MAX_KD_DEPTH;
 
 }  // namespace minemap

@@ -1,5 +1,6 @@
 #pragma once
 // Per-query closest-point search on the flat kd-tree, shared by the CPU backend and the tests.
+// Internal: not installed.
 // kernels/correspondence.cl implements the same traversal in OpenCL C; the two are kept
 // step-for-step alike (same visiting order, same strict '<' tie rule) so they find the same pairs.
 #include <Eigen/Core>
@@ -36,8 +37,7 @@ struct TreeHit {
 };
 
 inline float squared_distance(float px, float py, float pz, const Eigen::Vector3f& q) {
-  const float dx = px - q.x(), dy = py - q.y(), dz = pz - q.z();
-  return (dx * dx + dy * dy) + dz * dz;
+  return shared::mm_squared_distance3(px, py, pz, q.x(), q.y(), q.z());
 }
 
 inline float squared_distance(const KdPoint& p, const Eigen::Vector3f& q) { return squared_distance(p.x, p.y, p.z, q); }

@@ -3,8 +3,9 @@
 #include <algorithm>
 #include <array>
 #include <deque>
-#include <set>
 #include <stdexcept>
+
+#include "minemap/backend/cpu_backend.hpp"
 
 namespace minemap {
 namespace {
@@ -21,33 +22,21 @@ struct ScanState {
   Pose points_from_file = Pose::Identity();
 };
 
+/// One mapping run on one backend. A backend fault propagates (map_survey starts a fresh matcher
+/// on a CPU backend); nothing here is reset by hand.
 class SurveyMatcher {
  public:
-  SurveyMatcher(const std::vector<Scan>& scans, const MappingSettings& settings, const ProgressCallback& progress)
-      : scans_(scans), settings_(settings), progress_(progress) {}
+  SurveyMatcher(const std::vector<Scan>& scans, const MappingSettings& settings, ComputeBackend& backend,
+                const ProgressCallback& progress)
+      : scans_(scans), settings_(settings), backend_(backend), progress_(progress), icp_(settings.icp) {
+    // A pair of scans that passes the overlap test must also be registrable.
+    icp_.termination.min_pairs = std::min(icp_.termination.min_pairs, settings.min_overlap_pairs);
+  }
 
   MappingResult run() {
-    if (scans_.empty()) throw std::invalid_argument("the survey holds no scans");
-    auto choice = make_pairing_backend(settings_.backend);
-    backend_ = std::move(choice.backend);
-    result_.backend = backend_->name() + ": " + backend_->device_description();
-    result_.backend_note = choice.message;
-    try {
-      prepare_all();
-      match_all();
-    } catch (const BackendError& e) {
-      // The device failed mid-run: redo everything on the CPU, which gives the CPU run's poses.
-      const std::string warning = std::string("OpenCL failed (") + e.what() + "); the survey was matched again on the CPU";
-      result_ = MappingResult{};
-      notes_seen_.clear();
-      unstructured_noted_ = false;
-      backend_ = make_cpu_pairing_backend();
-      result_.backend = backend_->name() + ": " + backend_->device_description();
-      result_.backend_note = "CPU backend (TBB), after the OpenCL failure in the note";  // printed once, as the note
-      result_.notes.push_back(warning);
-      prepare_all();
-      match_all();
-    }
+    result_.backend = backend_.name() + ": " + backend_.device_description();
+    prepare_all();
+    match_all();
     return std::move(result_);
   }
 
@@ -59,7 +48,6 @@ class SurveyMatcher {
   void prepare_all() {
     states_.resize(scans_.size());
     result_.scans.resize(scans_.size());
-    const Backend filter_backend = backend_->name() == "opencl" ? Backend::kOpenCl : Backend::kCpu;
     for (std::size_t i = 0; i < scans_.size(); ++i) {
       const Scan& scan = scans_[i];
       ScanOutcome& outcome = result_.scans[i];
@@ -71,9 +59,7 @@ class SurveyMatcher {
       auto start = Clock::now();
       std::vector<Eigen::Vector3f> points;
       if (scan.has_slices() && settings_.filter_enabled) {
-        std::string note;
-        SliceFilterResult filtered = filter_scan(scan, settings_.filter, filter_backend, &note);
-        if (!note.empty() && notes_seen_.insert(note).second) result_.notes.push_back(note);
+        SliceFilterResult filtered = backend_.filter_slices(scan, settings_.filter);
         outcome.outliers_replaced = filtered.outliers_replaced;
         points = std::move(filtered.points_cm);
       } else {
@@ -90,7 +76,7 @@ class SurveyMatcher {
           settings_.model_slice_stride < settings_.filter.slice_stride) {
         SliceFilterSettings model_filter = settings_.filter;
         model_filter.slice_stride = settings_.model_slice_stride;
-        model_points = filter_scan(scan, model_filter, filter_backend, nullptr).points_cm;
+        model_points = backend_.filter_slices(scan, model_filter).points_cm;
         dense_model = true;
       } else if (settings_.dense_models && (!scan.has_slices() || !settings_.filter_enabled) &&
                  settings_.unstructured_point_stride > 1) {
@@ -102,8 +88,8 @@ class SurveyMatcher {
       start = Clock::now();
       ScanState& state = states_[i];
       outcome.used_points_cm = points;
-      state.cloud = backend_->prepare(std::move(points), settings_.tree);
-      state.model_cloud = dense_model ? backend_->prepare(std::move(model_points), settings_.tree) : state.cloud;
+      state.cloud = backend_.prepare(std::move(points), settings_.tree);
+      state.model_cloud = dense_model ? backend_.prepare(std::move(model_points), settings_.tree) : state.cloud;
       state.odometry = scan.world_from_points();
       state.pose = state.odometry;
       state.points_from_file = rigid_inverse(scan.world_from_points()) * scan.pose_cm;
@@ -168,7 +154,7 @@ class SurveyMatcher {
     const Pose start = states_[i - 1].pose * odometry_step;
     states_[i].pose = start;
     const std::vector<WorldModel> models = models_of({i - 1});
-    const IcpResult match = register_icp(*backend_, *states_[i].cloud, start, models, settings_.icp);
+    const IcpResult match = register_icp(backend_, *states_[i].cloud, start, models, icp_);
     result_.step1_icp_iterations += match.iterations();
     if (match.ok()) {
       set_pose(i, match.world_from_data, match);
@@ -184,7 +170,7 @@ class SurveyMatcher {
     const Pose odometry_step = rigid_inverse(states_[i - 1].odometry) * states_[i].odometry;
     states_[i].pose = states_[i - 1].pose * odometry_step;
     const auto models = models_of(nearby(i, i));  // the metascan: registered scans near the new one
-    const IcpResult match = register_icp(*backend_, *states_[i].cloud, states_[i].pose, models, settings_.icp);
+    const IcpResult match = register_icp(backend_, *states_[i].cloud, states_[i].pose, models, icp_);
     result_.step1_icp_iterations += match.iterations();
     if (match.ok()) {
       set_pose(i, match.world_from_data, match);
@@ -211,14 +197,14 @@ class SurveyMatcher {
       std::vector<std::size_t> neighbours;
       for (std::size_t j : nearby(current, newest + 1)) {
         const WorldModel model{states_[j].model_cloud.get(), states_[j].pose};
-        const std::size_t pairs = count_pairs(*backend_, *states_[current].cloud, states_[current].pose, model,
+        const std::size_t pairs = count_pairs(backend_, *states_[current].cloud, states_[current].pose, model,
                                               settings_.icp.max_pair_dist_cm);
         if (pairs > static_cast<std::size_t>(settings_.min_overlap_pairs)) neighbours.push_back(j);
       }
       if (neighbours.empty()) continue;
       const Pose before = states_[current].pose;
       const auto models = models_of(neighbours);
-      const IcpResult match = register_icp(*backend_, *states_[current].cloud, before, models, settings_.icp);
+      const IcpResult match = register_icp(backend_, *states_[current].cloud, before, models, icp_);
       ++matches;
       ++result_.relaxation_matches;
       ++result_.scans[current].relaxation_matches;
@@ -258,11 +244,11 @@ class SurveyMatcher {
 
   const std::vector<Scan>& scans_;
   const MappingSettings& settings_;
+  ComputeBackend& backend_;
   const ProgressCallback& progress_;
-  std::unique_ptr<PairingBackend> backend_;
+  IcpSettings icp_;  ///< settings.icp with min_pairs capped by the overlap threshold
   std::vector<ScanState> states_;
   MappingResult result_;
-  std::set<std::string> notes_seen_;
   bool unstructured_noted_ = false;
 };
 
@@ -288,11 +274,33 @@ bool MappingResult::all_registered() const {
   return std::all_of(scans.begin(), scans.end(), [](const ScanOutcome& s) { return s.registered; });
 }
 
-MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings,
+void MappingSettings::validate() const {
+  filter.validate();
+  icp.validate();
+  if (tree.bucket_size < 1) throw std::invalid_argument("kd-tree bucket size must be >= 1");
+  if (unstructured_point_stride < 1) throw std::invalid_argument("point stride must be >= 1");
+  if (model_slice_stride < 1) throw std::invalid_argument("model slice stride must be >= 1");
+  if (min_overlap_pairs < 0) throw std::invalid_argument("the overlap threshold must be >= 0 pairs");
+  if (max_relaxation_matches_per_scan < 0) throw std::invalid_argument("the relaxation cap must be >= 0");
+}
+
+MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings, ComputeBackend& backend,
                          const ProgressCallback& progress) {
-  settings.filter.validate();
-  if (settings.model_slice_stride < 1) throw std::invalid_argument("model slice stride must be >= 1");
-  return SurveyMatcher(scans, settings, progress).run();
+  settings.validate();
+  if (scans.empty()) throw std::invalid_argument("the survey holds no scans");
+  try {
+    return SurveyMatcher(scans, settings, backend, progress).run();
+  } catch (const BackendError& e) {
+    if (backend.name() == "cpu") throw;
+    // The device failed mid-run: match everything again on the CPU, which gives the CPU's poses.
+    const std::string failed = backend.name() == "opencl" ? "OpenCL" : backend.name();
+    CpuBackend cpu;
+    MappingResult result = SurveyMatcher(scans, settings, cpu, progress).run();
+    result.backend_note = "CPU backend (TBB), after the " + failed + " failure in the note";
+    result.notes.insert(result.notes.begin(),
+                        failed + " failed (" + e.what() + "); the survey was matched again on the CPU");
+    return result;
+  }
 }
 
 PoseErrors pose_errors(const std::vector<Pose>& estimated, const std::vector<Pose>& reference) {

@@ -10,18 +10,21 @@
 // The union is searched through each neighbour's own kd-tree (no tree of the union is rebuilt);
 // neighbour candidates are prefiltered by world bounds, so finding them costs one pairing pass per
 // nearby scan, not an ICP run per scan pair.
+//
+// The search, the sums and the slice filter run in the compute backend the caller hands in
+// (backend/compute_backend.hpp); Horn's method and this relaxation run on the host.
 #include <chrono>
 #include <functional>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "minemap/backend/compute_backend.hpp"
 #include "minemap/core/pose.hpp"
 #include "minemap/core/scan.hpp"
 #include "minemap/filter/slice_filter.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/registration/icp.hpp"
-#include "minemap/search/pairing.hpp"
 
 namespace minemap {
 
@@ -29,34 +32,41 @@ enum class MatchingMode { kPairwise, kIncremental, kSimultaneous };
 const char* to_string(MatchingMode mode);
 MatchingMode parse_matching_mode(const std::string& text);  ///< "pairwise", "incremental", "simultaneous"
 
+/// Everything map_survey takes. MappingSettings{} is minemap's default (the figures behind each
+/// choice are in docs/benchmarks.md); paper() is the paper's method as published.
+/// Thread-safety: a plain value.
 struct MappingSettings {
   MatchingMode mode = MatchingMode::kSimultaneous;
-  Backend backend = Backend::kAuto;
   bool filter_enabled = true;             ///< the slice filter (scans with slices)
   SliceFilterSettings filter;
   int unstructured_point_stride = 1;      ///< scans without slices: keep every n-th point
   KdTreeSettings tree;
-  IcpSettings icp = [] {
-    IcpSettings defaults;
-    defaults.refine_max_pair_dist_cm = 10.0f;  // coarse-to-fine: 25 cm, then 10 cm (see IcpSettings)
-    // Anderson acceleration: on the default 64-scan survey, 2.1x less relaxation time and a lower
-    // error (36 -> 30 cm) in one run (docs/benchmarks.md). --plain-icp turns it off.
-    defaults.accelerate = true;
-    return defaults;
-  }();
+  /// Coarse-to-fine (25 cm, then 10 cm) and Anderson-accelerated; paper(): plain, 25 cm only.
+  IcpSettings icp = IcpSettings::mapping();
   /// Models (the scans a scan is matched *against*) may be denser than the data being matched, as
   /// in KISS-ICP's double downsampling: a pair then measures the distance to the other scan's
   /// surface rather than to its 10 cm sampling, which removes much of point-to-point ICP's bias on
-  /// reduced data (docs/benchmarks.md: 0.27% -> 0.14% of the distance driven on the default
-  /// survey). On: a model keeps every `model_slice_stride`-th slice, filtered otherwise as `filter`
-  /// says (scans without slices: every point); the data keeps the paper's reduction. Off: models
-  /// are the data clouds, as in the paper.
+  /// reduced data. On: a model keeps every `model_slice_stride`-th slice, filtered otherwise as
+  /// `filter` says (scans without slices: every point); the data keeps the paper's reduction.
+  /// Off: models are the data clouds, as in the paper.
   bool dense_models = true;
   int model_slice_stride = 1;
-  int min_overlap_pairs = 250;            ///< the paper: overlap iff more than 250 pairs
+  /// The paper: scans overlap iff more than this many pairs. ICP's own minimum (icp.termination.
+  /// min_pairs) never exceeds it in mapping: a pair of scans that overlaps can be registered.
+  int min_overlap_pairs = 250;
   double moved_translation_cm = 5.0;      ///< step 3c: a match "moved" the scan beyond this...
-  double moved_rotation_deg = 0.25;       ///< ...or this (see docs/benchmarks.md for the trade-off)
+  double moved_rotation_deg = 0.25;       ///< ...or this
   int max_relaxation_matches_per_scan = 0;  ///< cap on step-3 matches after one new scan; 0 = 4 x scans so far
+
+  /// The paper's method: models reduced like the data, plain ICP at 25 cm (Table I's rows).
+  static MappingSettings paper() {
+    MappingSettings settings;
+    settings.icp = IcpSettings::paper();
+    settings.dense_models = false;
+    return settings;
+  }
+  /// Throws std::invalid_argument naming the bad setting (map_survey calls it once, at entry).
+  void validate() const;
 };
 
 /// How one scan ended up.
@@ -82,8 +92,8 @@ struct StageTimes {
 
 struct MappingResult {
   std::vector<ScanOutcome> scans;
-  std::string backend;  ///< "cpu" / "opencl" + device
-  std::string backend_note;
+  std::string backend;       ///< the backend that made the poses: "cpu: ..." / "opencl: <device>"
+  std::string backend_note;  ///< empty, or why another backend than the one handed in made them
   std::vector<std::string> notes;  ///< fallbacks, skipped filters
   StageTimes times;
   int step1_icp_iterations = 0;  ///< Table I: ICP iterations of the pairwise step
@@ -95,10 +105,12 @@ struct MappingResult {
 /// Reports progress: scans done of total, and a short phase name.
 using ProgressCallback = std::function<void(std::size_t done, std::size_t total, const std::string& phase)>;
 
-/// Registers `scans` (pose_cm = odometry / initial guess; scan 0 is the master and stays fixed).
-/// Throws std::invalid_argument on an empty survey. Registration failures do not throw: the scan
-/// keeps its odometry-based pose, `registered` is false and `failure` says why.
-MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings,
+/// Registers `scans` (pose_cm = odometry / initial guess; scan 0 is the master and stays fixed) on
+/// `backend`. Throws std::invalid_argument on an empty survey or invalid settings. Registration
+/// failures do not throw: the scan keeps its odometry-based pose, `registered` is false and
+/// `failure` says why. A BackendError (a device fault) makes it match the whole survey again on a
+/// fresh CPU backend, saying so in `notes`: the poses are then the CPU run's.
+MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings, ComputeBackend& backend,
                          const ProgressCallback& progress = {});
 
 /// Pose errors of `estimated` against `reference`, both expressed relative to scan 0 (the master

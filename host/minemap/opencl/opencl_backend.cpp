@@ -1,24 +1,27 @@
-// The OpenCL pairing backend: trees and clouds are uploaded once when prepared; each ICP iteration
-// launches one search kernel per model (the union of neighbours keeps the closest pair across
-// launches) and one reduction kernel. With double precision on the device, pair_sums_blocks makes
-// the CPU backend's per-block sums bit for bit and the host adds them in block order (same poses as
-// the CPU); without it, pair_sums reduces in float to 64 x 17 partial sums, added by the host in
-// double in group order. Deterministic either way, no atomics.
+// The OpenCL compute backend (opencl_backend.hpp). Trees and clouds are uploaded once when
+// prepared; each ICP iteration launches one search kernel per model (the union of neighbours keeps
+// the closest pair across launches) and one reduction kernel. With double precision on the device,
+// pair_sums_blocks makes the CPU backend's per-block sums bit for bit and the host adds them in
+// block order (same poses as the CPU); without it, pair_sums reduces in float to 64 x 17 partial
+// sums, added by the host in double in group order. Deterministic either way, no atomics.
+// The slice filter: one launch filters all kept slices of a scan, one work-item per slice; each
+// slice writes into its own input range (output never exceeds input).
+#include "minemap/opencl/opencl_backend.hpp"
+
 #include <algorithm>
 #include <array>
 #include <vector>
 
-#include "minemap/opencl/opencl_backend.hpp"
 #include "minemap/opencl/runtime.hpp"
 
 namespace minemap::opencl {
 namespace {
 
-constexpr std::size_t kSumTerms = 17;
+constexpr std::size_t kSumTerms = MM_SUM_TERMS;
 constexpr std::size_t kReductionGroups = 64;
 constexpr std::size_t kReductionGroupSize = 128;
 constexpr std::size_t kSearchGroupSize = 64;
-constexpr std::size_t kBruteTile = 256;  // must equal MM_BRUTE_TILE in correspondence.cl
+constexpr std::size_t kBruteTile = MM_BRUTE_TILE;
 
 cl_float4 to_float4(float x, float y, float z, float w) { return cl_float4{{x, y, z, w}}; }
 
@@ -43,6 +46,7 @@ cl::Buffer upload(Runtime& runtime, const std::vector<T>& host) {
   return runtime.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, const_cast<T*>(host.data()));
 }
 
+/// A cloud on the device: its points and its tree, uploaded once. Immutable after construction.
 class OpenClPreparedCloud final : public PreparedCloud {
  public:
   OpenClPreparedCloud(Runtime& runtime, std::vector<Eigen::Vector3f> points, const KdTreeSettings& settings)
@@ -59,24 +63,20 @@ class OpenClPreparedCloud final : public PreparedCloud {
     nodes_ = upload(runtime, std::vector<KdNode>(t.nodes().begin(), t.nodes().end()));
     tree_points_ = upload(runtime, std::vector<KdPoint>(t.points().begin(), t.points().end()));
     leaf_means_ = upload(runtime, std::vector<std::array<float, 4>>(t.leaf_means().begin(), t.leaf_means().end()));
-    const std::size_t n = std::max<std::size_t>(1, data.size());
-    best_pair_ = runtime.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
-    best_ref_ = runtime.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int2));
   }
 
-  cl::Buffer data_, nodes_, tree_points_, leaf_means_, best_pair_, best_ref_;
+  cl::Buffer data_, nodes_, tree_points_, leaf_means_;
 };
 
-class OpenClPairingBackend final : public PairingBackend {
+class OpenClBackend final : public ComputeBackend {
  public:
-  explicit OpenClPairingBackend(std::shared_ptr<Runtime> runtime) : runtime_(std::move(runtime)) {
+  explicit OpenClBackend(std::shared_ptr<Runtime> runtime) : runtime_(std::move(runtime)) {
     try {
-      // MINEMAP_OPENCL_INJECT_FAULT (runtime.hpp) counts launches and allocations from here.
-      runtime_->rearm_fault_injection();
       nearest_in_tree_ = cl::Kernel(runtime_->program(), "nearest_in_tree");
       nearest_brute_force_ = cl::Kernel(runtime_->program(), "nearest_brute_force");
       pair_sums_ = cl::Kernel(runtime_->program(), "pair_sums");
       if (runtime_->has_fp64()) pair_sums_blocks_ = cl::Kernel(runtime_->program(), "pair_sums_blocks");
+      filter_slices_ = cl::Kernel(runtime_->program(), "filter_slices");
       reduction_group_size_ = runtime_->work_group_size(pair_sums_, kReductionGroupSize);
       if (runtime_->work_group_size(nearest_brute_force_, kBruteTile) < kBruteTile) {
         throw DeviceError("device work-group limit is below the brute-force tile of " + std::to_string(kBruteTile));
@@ -85,7 +85,7 @@ class OpenClPairingBackend final : public PairingBackend {
     } catch (const DeviceError&) {
       throw;
     } catch (...) {
-      rethrow_as_device_error("creating the OpenCL pairing kernels");
+      rethrow_as_device_error("creating the OpenCL kernels");
     }
   }
 
@@ -111,6 +111,7 @@ class OpenClPairingBackend final : public PairingBackend {
     const auto n = static_cast<cl_int>(data.points().size());
     try {
       if (n == 0 || !search(cloud, n, models, method, settings)) return total;
+      // Only the per-group (or per-block) partial sums cross the bus.
       if (runtime_->has_fp64()) return sums_by_block(cloud, n, data.centroid_cm());
       // The centroid is float-representable (PreparedCloud rounds it), so the device subtracts
       // exactly the reference the host adds back in t = (c_m + r) - R (c_p + r).
@@ -118,7 +119,7 @@ class OpenClPairingBackend final : public PairingBackend {
       const cl_float4 reference = to_float4(r.x(), r.y(), r.z(), 0.0f);
       int arg = 0;
       pair_sums_.setArg(arg++, cloud.data_);
-      pair_sums_.setArg(arg++, cloud.best_pair_);
+      pair_sums_.setArg(arg++, best_pair_);
       pair_sums_.setArg(arg++, n);
       pair_sums_.setArg(arg++, reference);
       pair_sums_.setArg(arg++, partials_);
@@ -127,14 +128,7 @@ class OpenClPairingBackend final : public PairingBackend {
       std::array<float, kReductionGroups * kSumTerms> partial{};
       runtime_->queue().enqueueReadBuffer(partials_, CL_TRUE, 0, sizeof(partial), partial.data());
       for (std::size_t g = 0; g < kReductionGroups; ++g) {
-        const float* s = partial.data() + g * kSumTerms;
-        total.count += s[0];
-        total.sum_data += Eigen::Vector3d(s[1], s[2], s[3]);
-        total.sum_model += Eigen::Vector3d(s[4], s[5], s[6]);
-        Eigen::Matrix3d outer;
-        outer << s[7], s[8], s[9], s[10], s[11], s[12], s[13], s[14], s[15];
-        total.sum_data_model += outer;
-        total.sum_squared_distance_cm2 += s[16];
+        total += PairSums::from_terms(partial.data() + g * kSumTerms, total.reference_cm);
       }
     } catch (const DeviceError&) {
       throw;
@@ -154,9 +148,8 @@ class OpenClPairingBackend final : public PairingBackend {
     }
     int arg = 0;
     pair_sums_blocks_.setArg(arg++, cloud.data_);
-    pair_sums_blocks_.setArg(arg++, cloud.best_pair_);
+    pair_sums_blocks_.setArg(arg++, best_pair_);
     pair_sums_blocks_.setArg(arg++, n);
-    pair_sums_blocks_.setArg(arg++, static_cast<cl_int>(kPairSumBlock));
     pair_sums_blocks_.setArg(arg++, reference.x());
     pair_sums_blocks_.setArg(arg++, reference.y());
     pair_sums_blocks_.setArg(arg++, reference.z());
@@ -180,8 +173,8 @@ class OpenClPairingBackend final : public PairingBackend {
       if (n == 0 || !search(cloud, n, models, method, settings)) return result;
       std::vector<cl_float4> pairs(static_cast<std::size_t>(n));
       std::vector<cl_int2> refs(static_cast<std::size_t>(n));
-      runtime_->queue().enqueueReadBuffer(cloud.best_pair_, CL_TRUE, 0, pairs.size() * sizeof(cl_float4), pairs.data());
-      runtime_->queue().enqueueReadBuffer(cloud.best_ref_, CL_TRUE, 0, refs.size() * sizeof(cl_int2), refs.data());
+      runtime_->queue().enqueueReadBuffer(best_pair_, CL_TRUE, 0, pairs.size() * sizeof(cl_float4), pairs.data());
+      runtime_->queue().enqueueReadBuffer(best_ref_, CL_TRUE, 0, refs.size() * sizeof(cl_int2), refs.data());
       for (std::size_t i = 0; i < result.size(); ++i) {
         if (pairs[i].s[3] < 0.0f) continue;
         result[i] = {pairs[i].s[3], refs[i].s[0], refs[i].s[1], Eigen::Vector3f(pairs[i].s[0], pairs[i].s[1], pairs[i].s[2])};
@@ -194,6 +187,75 @@ class OpenClPairingBackend final : public PairingBackend {
     return result;
   }
 
+ protected:
+  SliceFilterResult filter_slices_checked(const Scan& scan, const SliceFilterSettings& settings) override {
+    SliceFilterResult result;
+    result.backend = "opencl";
+    result.points_in = scan.size();
+    const std::vector<std::size_t> kept_indices = kept_slice_indices(scan, settings);
+    if (scan.empty()) {
+      // Slices without points (no returns): one empty output slice per kept slice, as on the CPU;
+      // nothing to launch (OpenCL rejects zero-size buffers).
+      result.slice_offsets.assign(kept_indices.size() + 1, 0);
+      return result;
+    }
+    try {
+      cl::Kernel& kernel = filter_slices_;
+      Runtime* runtime = runtime_.get();
+      std::vector<cl_float4> points(scan.size());
+      for (std::size_t i = 0; i < scan.size(); ++i) {
+        points[i] = cl_float4{{scan.points_cm[i].x(), scan.points_cm[i].y(), scan.points_cm[i].z(), 0.0f}};
+      }
+      std::vector<cl_int> offsets(scan.slice_offsets.begin(), scan.slice_offsets.end());
+      const std::vector<cl_int> kept(kept_indices.begin(), kept_indices.end());
+      const std::size_t point_bytes = points.size() * sizeof(cl_float4);
+      cl::Buffer in = runtime->buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, point_bytes, points.data());
+      cl::Buffer slice_offsets =
+          runtime->buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, offsets.size() * sizeof(cl_int), offsets.data());
+      cl::Buffer kept_slices = runtime->buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, kept.size() * sizeof(cl_int),
+                                               const_cast<cl_int*>(kept.data()));
+      cl::Buffer out = runtime->buffer(CL_MEM_WRITE_ONLY, point_bytes);
+      cl::Buffer counts = runtime->buffer(CL_MEM_WRITE_ONLY, kept.size() * sizeof(cl_int));
+      cl::Buffer replaced = runtime->buffer(CL_MEM_WRITE_ONLY, kept.size() * sizeof(cl_int));
+      int arg = 0;
+      kernel.setArg(arg++, in);
+      kernel.setArg(arg++, slice_offsets);
+      kernel.setArg(arg++, kept_slices);
+      kernel.setArg(arg++, static_cast<cl_int>(kept.size()));
+      kernel.setArg(arg++, static_cast<cl_int>(settings.median_window / 2));
+      kernel.setArg(arg++, settings.outlier_threshold_cm);
+      kernel.setArg(arg++, settings.min_point_spacing_cm);
+      kernel.setArg(arg++, static_cast<cl_int>(settings.median_enabled ? 1 : 0));
+      kernel.setArg(arg++, static_cast<cl_int>(settings.reduction_enabled ? 1 : 0));
+      kernel.setArg(arg++, out);
+      kernel.setArg(arg++, counts);
+      kernel.setArg(arg++, replaced);
+      const std::size_t group = runtime->work_group_size(kernel, 64);
+      auto& queue = runtime->queue();
+      runtime->launch(kernel, round_up(kept.size(), group), group);
+      std::vector<cl_float4> filtered(points.size());
+      std::vector<cl_int> out_counts(kept.size()), out_replaced(kept.size());
+      // Blocking reads: each returns its own status (a failed non-blocking one might go unnoticed).
+      queue.enqueueReadBuffer(out, CL_TRUE, 0, point_bytes, filtered.data());
+      queue.enqueueReadBuffer(counts, CL_TRUE, 0, out_counts.size() * sizeof(cl_int), out_counts.data());
+      queue.enqueueReadBuffer(replaced, CL_TRUE, 0, out_replaced.size() * sizeof(cl_int), out_replaced.data());
+      result.slice_offsets.push_back(0);
+      for (std::size_t k = 0; k < kept.size(); ++k) {
+        const auto begin = static_cast<std::size_t>(offsets[static_cast<std::size_t>(kept[k])]);
+        result.points_in_kept_slices += static_cast<std::size_t>(offsets[static_cast<std::size_t>(kept[k]) + 1]) - begin;
+        result.outliers_replaced += static_cast<std::size_t>(out_replaced[k]);
+        for (int i = 0; i < out_counts[k]; ++i) {
+          const cl_float4& p = filtered[begin + static_cast<std::size_t>(i)];
+          result.points_cm.emplace_back(p.s[0], p.s[1], p.s[2]);
+        }
+        result.slice_offsets.push_back(static_cast<std::uint32_t>(result.points_cm.size()));
+      }
+      return result;
+    } catch (...) {
+      rethrow_as_device_error("OpenCL slice filter");
+    }
+  }
+
  private:
   static const OpenClPreparedCloud& as_device(const PreparedCloud& cloud) {
     const auto* device_cloud = dynamic_cast<const OpenClPreparedCloud*>(&cloud);
@@ -204,6 +266,7 @@ class OpenClPairingBackend final : public PairingBackend {
   /// Launches the search for every model; false when no model could pair anything (all empty).
   bool search(const OpenClPreparedCloud& cloud, cl_int n, std::span<const ModelPlacement> models, SearchMethod method,
               const PairingSettings& settings) {
+    reserve_scratch(static_cast<std::size_t>(n));
     const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
     bool first = true;
     for (std::size_t k = 0; k < models.size(); ++k) {
@@ -230,8 +293,8 @@ class OpenClPairingBackend final : public PairingBackend {
         kernel.setArg(arg++, max_squared);
         kernel.setArg(arg++, model_id);
         kernel.setArg(arg++, first_model);
-        kernel.setArg(arg++, cloud.best_pair_);
-        kernel.setArg(arg++, cloud.best_ref_);
+        kernel.setArg(arg++, best_pair_);
+        kernel.setArg(arg++, best_ref_);
         runtime_->launch(kernel, round_up(static_cast<std::size_t>(n), kBruteTile), kBruteTile);
       } else {
         cl::Kernel& kernel = nearest_in_tree_;
@@ -249,8 +312,8 @@ class OpenClPairingBackend final : public PairingBackend {
         kernel.setArg(arg++, max_squared);
         kernel.setArg(arg++, model_id);
         kernel.setArg(arg++, first_model);
-        kernel.setArg(arg++, cloud.best_pair_);
-        kernel.setArg(arg++, cloud.best_ref_);
+        kernel.setArg(arg++, best_pair_);
+        kernel.setArg(arg++, best_ref_);
         const std::size_t group = runtime_->work_group_size(kernel, kSearchGroupSize);
         runtime_->launch(kernel, round_up(static_cast<std::size_t>(n), group), group);
       }
@@ -259,8 +322,19 @@ class OpenClPairingBackend final : public PairingBackend {
     return !first;
   }
 
+  /// The per-query results of a search (closest pair so far, and its reference), held by the
+  /// backend, not the clouds: prepared clouds stay immutable. Grown, never shrunk.
+  void reserve_scratch(std::size_t n) {
+    if (scratch_capacity_ >= n) return;
+    best_pair_ = runtime_->buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+    best_ref_ = runtime_->buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int2));
+    scratch_capacity_ = n;
+  }
+
   std::shared_ptr<Runtime> runtime_;
-  cl::Kernel nearest_in_tree_, nearest_brute_force_, pair_sums_;
+  cl::Kernel nearest_in_tree_, nearest_brute_force_, pair_sums_, filter_slices_;
+  cl::Buffer best_pair_, best_ref_;
+  std::size_t scratch_capacity_ = 0;
   std::size_t reduction_group_size_ = kReductionGroupSize;
   cl::Buffer partials_;
   cl::Kernel pair_sums_blocks_;  ///< only on devices with cl_khr_fp64
@@ -270,14 +344,13 @@ class OpenClPairingBackend final : public PairingBackend {
 
 }  // namespace
 
-std::unique_ptr<PairingBackend> make_opencl_pairing_backend(bool allow_cpu_device, std::string* why_not) {
-  auto runtime = Runtime::get(allow_cpu_device, why_not);
-  if (!runtime) return nullptr;
+std::unique_ptr<ComputeBackend> make_opencl_backend(const OpenClOptions& options) {
   try {
-    return std::make_unique<OpenClPairingBackend>(runtime);
+    return std::make_unique<OpenClBackend>(Runtime::create(options));
+  } catch (const DeviceError&) {
+    throw;
   } catch (const std::exception& e) {
-    if (why_not) *why_not = e.what();
-    return nullptr;
+    throw DeviceError(e.what());
   }
 }
 

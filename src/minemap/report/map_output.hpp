@@ -17,6 +17,7 @@ struct MapOutputSettings {
   int up_axis = 1;                            ///< 1 (y) for 3DTK frames, 2 (z) for right-handed ones
   std::string title;                          ///< drawn on the pictures
   double load_s = 0.0;                        ///< reading time, for the report
+  std::string backend_choice;                 ///< how the backend was chosen (make_backend's message)
 };
 
 /// Pose errors before (odometry) and after registration, when the survey has reference poses.

@@ -1,4 +1,4 @@
-#include "minemap/slam/map_output.hpp"
+#include "minemap/report/map_output.hpp"
 
 #include <chrono>
 #include <nlohmann/json.hpp>
@@ -86,11 +86,14 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
   report["mode"] = to_string(settings.mode);
   report["search"] = to_string(settings.icp.method);
   report["backend"] = result.backend;
+  report["backend_choice"] = output.backend_choice;
   report["backend_note"] = result.backend_note;
   report["notes"] = result.notes;
   report["settings"] = {{"max_pair_dist_cm", settings.icp.max_pair_dist_cm},
-                        {"refine_max_pair_dist_cm", settings.icp.refine_max_pair_dist_cm},
-                        {"max_iterations", settings.icp.max_iterations},
+                        {"refine_max_pair_dist_cm", settings.icp.refine_max_pair_dist_cm()},
+                        {"max_iterations", settings.icp.termination.max_iterations},
+                        {"accelerate", settings.icp.accelerate},
+                        {"dense_models", settings.dense_models},
                         {"bucket_size", settings.tree.bucket_size},
                         {"filter", settings.filter_enabled},
                         {"median_window", settings.filter.median_window},

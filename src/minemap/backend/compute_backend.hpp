@@ -1,0 +1,76 @@
+#pragma once
+// The one seam between the algorithm and the hardware: a compute backend prepares clouds (kd-tree
+// and device copies), pairs and sums for ICP, and runs the slice filter. Everything else (Horn's
+// method, the ICP schedule, the relaxation) runs on the host and calls a backend it is handed.
+//
+// Backends are values the caller owns, one file each:
+//   CpuBackend     backend/cpu_backend.cpp: TBB over fixed blocks, deterministic
+//   OpenClBackend  host/minemap/opencl/opencl_backend.cpp (target minemap::opencl, built where
+//                  CMake finds OpenCL): one work-item per query; its runtime, programs and scratch
+//                  buffers are its members
+// The composition root (the CLI, tests, benchmarks) makes one, usually through make_backend
+// (host/minemap/backend/make_backend.hpp), and passes it to map_survey or register_icp.
+//
+// Both backends compute the same float and double operations in the same order
+// (minemap/shared/minemap_shared.h): on a device with double precision they return the same bits.
+#include <Eigen/Core>
+#include <memory>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "minemap/filter/slice_filter.hpp"
+#include "minemap/registration/point_to_point.hpp"
+#include "minemap/search/pairing.hpp"
+
+namespace minemap {
+
+/// A backend failed while running (an OpenCL device ran out of resources or was lost), or could
+/// not be set up. map_survey catches it and matches the survey again on a CPU backend.
+class BackendError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// Thread-safety: a backend is used from one thread at a time (it parallelises internally, and owns
+/// scratch state); the clouds it prepares are immutable and may be read from any thread, as long as
+/// the backend lives.
+class ComputeBackend {
+ public:
+  virtual ~ComputeBackend() = default;
+  /// "cpu" or "opencl".
+  virtual std::string name() const = 0;
+  /// The device, for reports: "CPU (TBB bucket kd-tree)", "Portable Computing Language / cpu-... (driver ...)".
+  virtual std::string device_description() const = 0;
+
+  /// Builds the kd-tree (and device copies) of a cloud used as data and/or model.
+  virtual std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points_cm,
+                                                       const KdTreeSettings& tree_settings) = 0;
+
+  /// Pairs every data point with its closest point over all `models` within the pair bound and
+  /// returns the point-to-point sums, centred on the data cloud's centroid. Clouds must come from
+  /// this backend's prepare().
+  virtual PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models,
+                                SearchMethod method, const PairingSettings& settings) = 0;
+
+  /// The closest pair of every data point (tests, diagnostics).
+  virtual std::vector<NearestPair> nearest(const PreparedCloud& data, std::span<const ModelPlacement> models,
+                                           SearchMethod method, const PairingSettings& settings) = 0;
+
+  /// The paper's slice filter (filter/slice_filter.hpp). Throws std::invalid_argument for invalid
+  /// settings; a scan without slices comes back unchanged, as one output slice (unfiltered_result).
+  SliceFilterResult filter_slices(const Scan& scan, const SliceFilterSettings& settings) {
+    settings.validate();
+    return scan.has_slices() ? filter_slices_checked(scan, settings) : unfiltered_result(scan, name());
+  }
+
+ protected:
+  /// filter_slices for a scan with slices and validated settings.
+  virtual SliceFilterResult filter_slices_checked(const Scan& scan, const SliceFilterSettings& settings) = 0;
+};
+
+/// The TBB backend (backend/cpu_backend.cpp). Always available.
+std::unique_ptr<ComputeBackend> make_cpu_backend();
+
+}  // namespace minemap

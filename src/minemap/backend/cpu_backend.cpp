@@ -1,0 +1,145 @@
+// The CPU compute backend (cpu_backend.hpp).
+#include "minemap/backend/cpu_backend.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <array>
+#include <limits>
+
+#include "minemap/filter/slice_filter_cpu.hpp"
+#include "minemap/search/pairing_math.hpp"
+
+namespace minemap {
+namespace {
+
+constexpr auto kQueriesPerBlock = static_cast<std::size_t>(kPairSumBlock);
+
+class CpuPreparedCloud final : public PreparedCloud {
+ public:
+  CpuPreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& settings)
+      : PreparedCloud(std::move(points), settings) {}
+};
+
+/// One model as the hot loop needs it: data->model and model->data transforms in float.
+struct PlacedModel {
+  const KdTree* tree;
+  detail::RigidF model_from_data;
+  detail::RigidF data_from_model;
+};
+
+std::vector<PlacedModel> place_models(std::span<const ModelPlacement> models) {
+  std::vector<PlacedModel> placed;
+  placed.reserve(models.size());
+  for (const auto& m : models) {
+    const Pose inverse = rigid_inverse(m.model_from_data);
+    placed.push_back({&m.model->tree(),
+                      {m.model_from_data.block<3, 3>(0, 0).cast<float>(), m.model_from_data.block<3, 1>(0, 3).cast<float>()},
+                      {inverse.block<3, 3>(0, 0).cast<float>(), inverse.block<3, 1>(0, 3).cast<float>()}});
+  }
+  return placed;
+}
+
+/// The closest point of data point `p` over all models. `hints` holds, per model, the tree point
+/// found for the previous query of this block (or -1): queries run along the scan's slices, so that
+/// point is usually a few cm away and its distance, rounded one ulp up, is a far tighter starting
+/// bound than the pair distance. See detail::exact_nearest for why the result cannot change.
+NearestPair find_nearest(const Eigen::Vector3f& p, const std::vector<PlacedModel>& models, SearchMethod method,
+                         float max_squared_distance, std::int32_t* hints) {
+  NearestPair result;
+  float best = max_squared_distance;
+  for (std::size_t k = 0; k < models.size(); ++k) {
+    const PlacedModel& model = models[k];
+    if (model.tree->empty()) continue;
+    const Eigen::Vector3f q = model.model_from_data.apply(p);
+    if (detail::squared_distance_to_bounds(*model.tree, q) >= best) continue;
+    if (method == SearchMethod::kApproximate) {
+      const auto& mean = model.tree->leaf_means()[static_cast<std::size_t>(detail::approximate_leaf(*model.tree, q))];
+      const Eigen::Vector3f m(mean[0], mean[1], mean[2]);
+      const float d = detail::squared_distance(mean[0], mean[1], mean[2], q);
+      if (d < best) {
+        best = d;
+        result = {d, static_cast<std::int32_t>(k), -1, model.data_from_model.apply(m)};
+      }
+      continue;
+    }
+    std::int32_t hit = -1;
+    if (method == SearchMethod::kExact) {
+      detail::exact_nearest(*model.tree, q, best, hit, hints[k]);
+      if (hit >= 0) hints[k] = hit;
+    } else {
+      detail::brute_force_nearest(*model.tree, q, best, hit);
+    }
+    if (hit >= 0) {
+      const KdPoint& m = model.tree->points()[static_cast<std::size_t>(hit)];
+      result = {best, static_cast<std::int32_t>(k), m.original_index,
+                model.data_from_model.apply(Eigen::Vector3f(m.x, m.y, m.z))};
+    }
+  }
+  return result;
+}
+
+}  // namespace
+
+std::shared_ptr<const PreparedCloud> CpuBackend::prepare(std::vector<Eigen::Vector3f> points_cm,
+                                                         const KdTreeSettings& tree_settings) {
+  return std::make_shared<CpuPreparedCloud>(std::move(points_cm), tree_settings);
+}
+
+PairSums CpuBackend::pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
+                                  const PairingSettings& settings) {
+  const auto placed = place_models(models);
+  const auto points = data.points();
+  const Eigen::Vector3d reference = data.centroid_cm();
+  const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
+  const std::size_t blocks = (points.size() + kQueriesPerBlock - 1) / kQueriesPerBlock;
+  std::vector<PairSums> partial(blocks);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const tbb::blocked_range<std::size_t>& range) {
+    // Hints never change a result (detail::exact_nearest), so they may carry across blocks.
+    std::vector<std::int32_t> hints(placed.size(), -1);
+    for (std::size_t b = range.begin(); b != range.end(); ++b) {
+      std::array<double, kSumTerms> terms{};  // one block's sums, as pair_sums_blocks makes them
+      const std::size_t end = std::min(points.size(), (b + 1) * kQueriesPerBlock);
+      for (std::size_t i = b * kQueriesPerBlock; i < end; ++i) {
+        const NearestPair pair = find_nearest(points[i], placed, method, max_squared, hints.data());
+        if (pair.squared_distance_cm2 < 0.0f) continue;
+        const Eigen::Vector3f& p = points[i];
+        const Eigen::Vector3f& m = pair.position_cm;
+        const double pc[3] = {static_cast<double>(p.x()) - reference.x(), static_cast<double>(p.y()) - reference.y(),
+                              static_cast<double>(p.z()) - reference.z()};
+        const double mc[3] = {static_cast<double>(m.x()) - reference.x(), static_cast<double>(m.y()) - reference.y(),
+                              static_cast<double>(m.z()) - reference.z()};
+        shared::mm_add_point_to_point_terms(terms.data(), pc, mc, pair.squared_distance_cm2);
+      }
+      partial[b] = PairSums::from_terms(terms.data(), reference);
+    }
+  });
+  PairSums total;
+  total.reference_cm = reference;
+  for (const auto& s : partial) total += s;
+  return total;
+}
+
+std::vector<NearestPair> CpuBackend::nearest(const PreparedCloud& data, std::span<const ModelPlacement> models,
+                                             SearchMethod method, const PairingSettings& settings) {
+  const auto placed = place_models(models);
+  const auto points = data.points();
+  const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
+  std::vector<NearestPair> result(points.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), kQueriesPerBlock),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      std::vector<std::int32_t> hints(placed.size(), -1);
+                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        result[i] = find_nearest(points[i], placed, method, max_squared, hints.data());
+                      }
+                    });
+  return result;
+}
+
+SliceFilterResult CpuBackend::filter_slices_checked(const Scan& scan, const SliceFilterSettings& settings) {
+  return detail::filter_slices_cpu(scan, settings);
+}
+
+std::unique_ptr<ComputeBackend> make_cpu_backend() { return std::make_unique<CpuBackend>(); }
+
+}  // namespace minemap
