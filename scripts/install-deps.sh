@@ -20,7 +20,7 @@ build_packages=(build-essential cmake pkg-config libeigen3-dev libtbb-dev ocl-ic
 test_packages=(clang libclang-rt-14-dev llvm dpkg-dev locales)
 # Optional peers: CMake builds what uses them only where it finds them (bench/CMakeLists.txt).
 optional_packages=(libnanoflann-dev libopen3d-dev libpcl-dev libopenmpi-dev)
-bench_tools=(python3 python3-matplotlib valgrind)
+bench_tools=(python3 python3-matplotlib valgrind time)
 
 packages_of() {
   case "$1" in

@@ -159,6 +159,29 @@ TEST_F(Faults, AnUnknownInjectionIsRefusedLoudly) {
   EXPECT_EQ(lines_containing(output, "MINEMAP_OPENCL_INJECT_FAULT='sometimes' is not understood").size(), 1u) << output;
 }
 
+// A backend is an object: setup faults no longer need a fresh process, and one broken backend does
+// not stop the next one from working.
+TEST(FaultsInProcess, SetupFaultsAreTestedInOneProcessAndLeaveNothingBehind) {
+  BackendOptions options;
+  options.kind = Backend::kOpenCl;
+  options.opencl.fault = opencl::InjectedFault::parse("build");
+  try {
+    (void)make_backend(options);
+    ADD_FAILURE() << "a broken kernel build made a backend";
+  } catch (const BackendError& e) {
+    EXPECT_NE(std::string(e.what()).find("CL_BUILD_PROGRAM_FAILURE"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("not_opencl_c"), std::string::npos) << e.what();
+  }
+  options.kind = Backend::kAuto;
+  options.opencl.device = "portable";  // auto builds only for a device it would use: name PoCL
+  const BackendChoice fallback = make_backend(options);
+  EXPECT_EQ(fallback.backend->name(), "cpu");
+  EXPECT_NE(fallback.message.find("kernel build failed"), std::string::npos) << fallback.message;
+  options.kind = Backend::kOpenCl;
+  options.opencl.fault = {};
+  EXPECT_EQ(make_backend(options).backend->name(), "opencl");  // throws (the test fails) without OpenCL
+}
+
 TEST(FaultsInProcess, ARealAllocationFailureBecomesADeviceError) {
 #if !MINEMAP_WITH_OPENCL
   FAIL() << "minemap was built without OpenCL";

@@ -202,8 +202,8 @@ IcpResult register_icp(ComputeBackend& backend, const PreparedCloud& data, const
 
   // The first exact phase measures accelerated poses from where the approximate phase converged,
   // or from the start when that phase ended because the error rose (its last steps were not
-  // trusted). This is the origin minemap has always used; on a 6-scan survey it took 6 % fewer
-  // iterations than re-centring there too.
+  // trusted). This is the origin minemap has always used (docs/benchmarks.md compares it with
+  // re-centring there too).
   PhaseEnd end = PhaseEnd::kConverged;
   if (settings.method == SearchMethod::kApproximate) end = run.approximate();
   if (end == PhaseEnd::kConverged || end == PhaseEnd::kErrorRose) {

@@ -69,8 +69,8 @@ std::int32_t KdTree::build(std::int32_t begin, std::int32_t end, int depth, floa
     for (int d = 0; d < 3; ++d) sum[d] = static_cast<float>(sum_d[d] / count);
     const auto leaf_index = static_cast<std::int32_t>(leaf_means_.size());
     leaf_means_.push_back({sum[0], sum[1], sum[2], static_cast<float>(count)});
-    // A bucket of copies of one point (a LiDAR's no-return points at its origin: 5032 of the
-    // 69088 in fast_gicp_pair's target) is searched as its first point alone. Every copy is at the
+    // A bucket of copies of one point (a LiDAR's no-return points at its origin, thousands in a
+    // real scan; docs/benchmarks.md) is searched as its first point alone. Every copy is at the
     // same distance and a search keeps the first of equals, so the results do not change; a query
     // near such a pile no longer scans all of it.
     const KdPoint& first = points_[begin];
