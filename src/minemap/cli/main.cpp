@@ -267,6 +267,12 @@ int main(int argc, char** argv) {
       ->transform(CLI::CheckedTransformer(std::map<std::string, minemap::Backend>{
           {"auto", minemap::Backend::kAuto}, {"cpu", minemap::Backend::kCpu}, {"opencl", minemap::Backend::kOpenCl}}))
       ->default_str(minemap::to_string(map.backend));
+  map_cmd->add_option("--reduction", mapping.reduction,
+                      "slices (the paper's slice filter) | voxel (the mean of each --voxel-cm cell, every scan)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, minemap::Reduction>{
+          {"slices", minemap::Reduction::kSlices}, {"voxel", minemap::Reduction::kVoxel}}))
+      ->default_str(minemap::to_string(mapping.reduction));
+  map_cmd->add_option("--voxel-cm", mapping.voxel_cm, "Voxel size of --reduction voxel")->capture_default_str();
   map_cmd->add_flag("--no-filter", map.no_filter, "Skip the slice filter (median + reduction + every 3rd slice)");
   map_cmd->add_option("--max-pair-dist-cm", icp.max_pair_dist_cm, "Maximum point-pair distance")->capture_default_str();
   map_cmd->add_option("--refine-fraction", icp.refine_pair_dist_fraction,

@@ -96,6 +96,8 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
                         {"dense_models", settings.dense_models},
                         {"bucket_size", settings.tree.bucket_size},
                         {"filter", settings.filter_enabled},
+                        {"reduction", to_string(settings.reduction)},
+                        {"voxel_cm", settings.voxel_cm},
                         {"median_window", settings.filter.median_window},
                         {"outlier_threshold_cm", settings.filter.outlier_threshold_cm},
                         {"min_point_spacing_cm", settings.filter.min_point_spacing_cm},

@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <deque>
 #include <stdexcept>
 
 #include "minemap/backend/cpu_backend.hpp"
+#include "minemap/filter/voxel_filter.hpp"
 
 namespace minemap {
 namespace {
@@ -58,7 +60,9 @@ class SurveyMatcher {
       outcome.frames.push_back({scan.pose_cm, 0});
       auto start = Clock::now();
       std::vector<Eigen::Vector3f> points;
-      if (scan.has_slices() && settings_.filter_enabled) {
+      if (settings_.reduction == Reduction::kVoxel) {
+        points = voxel_mean_filter(scan.points_cm, settings_.voxel_cm);
+      } else if (scan.has_slices() && settings_.filter_enabled) {
         SliceFilterResult filtered = backend_.filter_slices(scan, settings_.filter);
         outcome.outliers_replaced = filtered.outliers_replaced;
         points = std::move(filtered.points_cm);
@@ -72,7 +76,9 @@ class SurveyMatcher {
       // The denser model cloud (see MappingSettings::dense_models); none when it would equal the data.
       std::vector<Eigen::Vector3f> model_points;
       bool dense_model = false;
-      if (settings_.dense_models && scan.has_slices() && settings_.filter_enabled &&
+      if (settings_.reduction == Reduction::kVoxel) {
+        // the data clouds are the models
+      } else if (settings_.dense_models && scan.has_slices() && settings_.filter_enabled &&
           settings_.model_slice_stride < settings_.filter.slice_stride) {
         SliceFilterSettings model_filter = settings_.filter;
         model_filter.slice_stride = settings_.model_slice_stride;
@@ -169,8 +175,24 @@ class SurveyMatcher {
   void match_incremental(std::size_t i) {
     const Pose odometry_step = rigid_inverse(states_[i - 1].odometry) * states_[i].odometry;
     states_[i].pose = states_[i - 1].pose * odometry_step;
-    const auto models = models_of(nearby(i, i));  // the metascan: registered scans near the new one
-    const IcpResult match = register_icp(backend_, *states_[i].cloud, states_[i].pose, models, icp_);
+    // The metascan: one kd-tree over the points of the registered scans near the new one, as the
+    // paper (and slam6D) match against. One tree answers each query once, where searching every
+    // neighbour's own tree in turn costs a search per overlapping scan. Built in the frame of the
+    // previous scan, so its float coordinates stay small wherever the survey is.
+    const Pose frame = states_[i - 1].pose;
+    const Pose frame_inverse = rigid_inverse(frame);
+    std::vector<Eigen::Vector3f> union_points;
+    for (std::size_t j : nearby(i, i)) {
+      const Pose to_frame = frame_inverse * states_[j].pose;
+      const Eigen::Matrix3d rotation = to_frame.block<3, 3>(0, 0);
+      const Eigen::Vector3d translation = to_frame.block<3, 1>(0, 3);
+      for (const Eigen::Vector3f& p : states_[j].model_cloud->points()) {
+        union_points.push_back((rotation * p.cast<double>() + translation).cast<float>());
+      }
+    }
+    const auto metascan = backend_.prepare(std::move(union_points), settings_.tree);
+    const WorldModel model{metascan.get(), frame};
+    const IcpResult match = register_icp(backend_, *states_[i].cloud, states_[i].pose, {&model, 1}, icp_);
     result_.step1_icp_iterations += match.iterations();
     if (match.ok()) {
       set_pose(i, match.world_from_data, match);
@@ -270,6 +292,14 @@ MatchingMode parse_matching_mode(const std::string& text) {
   throw std::invalid_argument("unknown mode '" + text + "' (expected pairwise, incremental or simultaneous)");
 }
 
+const char* to_string(Reduction reduction) {
+  switch (reduction) {
+    case Reduction::kSlices: return "slices";
+    case Reduction::kVoxel: return "voxel";
+  }
+  return "?";
+}
+
 bool MappingResult::all_registered() const {
   return std::all_of(scans.begin(), scans.end(), [](const ScanOutcome& s) { return s.registered; });
 }
@@ -282,6 +312,9 @@ void MappingSettings::validate() const {
   if (model_slice_stride < 1) throw std::invalid_argument("model slice stride must be >= 1");
   if (min_overlap_pairs < 0) throw std::invalid_argument("the overlap threshold must be >= 0 pairs");
   if (max_relaxation_matches_per_scan < 0) throw std::invalid_argument("the relaxation cap must be >= 0");
+  if (reduction == Reduction::kVoxel && (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm))) {
+    throw std::invalid_argument("the voxel size must be a finite length > 0 cm");
+  }
 }
 
 MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings, ComputeBackend& backend,

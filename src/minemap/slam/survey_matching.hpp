@@ -29,6 +29,13 @@
 namespace minemap {
 
 enum class MatchingMode { kPairwise, kIncremental, kSimultaneous };
+
+/// How each scan is reduced before matching.
+enum class Reduction {
+  kSlices,  ///< the paper's slice filter (median, 10 cm along each slice, every third slice)
+  kVoxel,   ///< the mean of each voxel_cm cell, every point (filter/voxel_filter.hpp), as slam6D's octree
+};
+const char* to_string(Reduction reduction);
 const char* to_string(MatchingMode mode);
 MatchingMode parse_matching_mode(const std::string& text);  ///< "pairwise", "incremental", "simultaneous"
 
@@ -39,6 +46,10 @@ struct MappingSettings {
   MatchingMode mode = MatchingMode::kSimultaneous;
   bool filter_enabled = true;             ///< the slice filter (scans with slices)
   SliceFilterSettings filter;
+  /// kVoxel reduces every scan, sliced or not, to voxel means; its models are its data clouds
+  /// (dense_models and the slice filter do not apply).
+  Reduction reduction = Reduction::kSlices;
+  float voxel_cm = 15.0f;
   int unstructured_point_stride = 1;      ///< scans without slices: keep every n-th point
   KdTreeSettings tree;
   /// Coarse-to-fine (25 cm, then 10 cm) and Anderson-accelerated; paper(): plain, 25 cm only.
