@@ -251,27 +251,20 @@ int main(int argc, char** argv) {
   map_cmd->add_option("--out", map.out, "Output folder")->required();
   add_threads(map_cmd);
   add_opencl_device(map_cmd);
-  map_cmd->add_option("--mode", mapping.mode, "pairwise | incremental | simultaneous")
-      ->transform(CLI::CheckedTransformer(std::map<std::string, minemap::MatchingMode>{
-          {"pairwise", minemap::MatchingMode::kPairwise},
-          {"incremental", minemap::MatchingMode::kIncremental},
-          {"simultaneous", minemap::MatchingMode::kSimultaneous}}))
-      ->default_str(minemap::to_string(mapping.mode));
-  map_cmd->add_option("--search", icp.method, "kd (exact) | apx (approximate, then exact) | brute")
-      ->transform(CLI::CheckedTransformer(std::map<std::string, minemap::SearchMethod>{
-          {"kd", minemap::SearchMethod::kExact},
-          {"apx", minemap::SearchMethod::kApproximate},
-          {"brute", minemap::SearchMethod::kBruteForce}}))
-      ->default_str(minemap::to_string(icp.method));
-  map_cmd->add_option("--backend", map.backend, "auto | cpu | opencl")
-      ->transform(CLI::CheckedTransformer(std::map<std::string, minemap::Backend>{
-          {"auto", minemap::Backend::kAuto}, {"cpu", minemap::Backend::kCpu}, {"opencl", minemap::Backend::kOpenCl}}))
-      ->default_str(minemap::to_string(map.backend));
-  map_cmd->add_option("--reduction", mapping.reduction,
-                      "slices (the paper's slice filter) | voxel (the mean of each --voxel-cm cell, every scan)")
-      ->transform(CLI::CheckedTransformer(std::map<std::string, minemap::Reduction>{
-          {"slices", minemap::Reduction::kSlices}, {"voxel", minemap::Reduction::kVoxel}}))
-      ->default_str(minemap::to_string(mapping.reduction));
+  // Choices by name, parsed by the library's own parse functions (one list of names each).
+  const auto add_choice = [&](const std::string& name, auto& value, auto parse, std::vector<std::string> names,
+                              const std::string& help) {
+    map_cmd->add_option_function<std::string>(name, [&value, parse](const std::string& text) { value = parse(text); }, help)
+        ->check(CLI::IsMember(names))
+        ->default_str(minemap::to_string(value));
+  };
+  add_choice("--mode", mapping.mode, minemap::parse_matching_mode, {"pairwise", "incremental", "simultaneous"},
+             "How scans are matched (the paper's section IV.B)");
+  add_choice("--search", icp.method, minemap::parse_search_method, {"kd", "apx", "brute"},
+             "kd (exact) | apx (approximate, then exact) | brute");
+  add_choice("--backend", map.backend, minemap::parse_backend, {"auto", "cpu", "opencl"}, "Where the search runs");
+  add_choice("--reduction", mapping.reduction, minemap::parse_reduction, {"slices", "voxel"},
+             "slices (the paper's slice filter) | voxel (the mean of each --voxel-cm cell, every scan)");
   map_cmd->add_option("--voxel-cm", mapping.voxel_cm, "Voxel size of --reduction voxel")->capture_default_str();
   map_cmd->add_flag("--no-filter", map.no_filter, "Skip the slice filter (median + reduction + every 3rd slice)");
   map_cmd->add_option("--max-pair-dist-cm", icp.max_pair_dist_cm, "Maximum point-pair distance")->capture_default_str();

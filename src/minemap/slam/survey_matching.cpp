@@ -300,6 +300,12 @@ const char* to_string(Reduction reduction) {
   return "?";
 }
 
+Reduction parse_reduction(const std::string& text) {
+  if (text == "slices") return Reduction::kSlices;
+  if (text == "voxel") return Reduction::kVoxel;
+  throw std::invalid_argument("unknown reduction '" + text + "' (expected slices or voxel)");
+}
+
 bool MappingResult::all_registered() const {
   return std::all_of(scans.begin(), scans.end(), [](const ScanOutcome& s) { return s.registered; });
 }

@@ -36,6 +36,7 @@ enum class Reduction {
   kVoxel,   ///< the mean of each voxel_cm cell, every point (filter/voxel_filter.hpp), as slam6D's octree
 };
 const char* to_string(Reduction reduction);
+Reduction parse_reduction(const std::string& text);  ///< "slices", "voxel"
 const char* to_string(MatchingMode mode);
 MatchingMode parse_matching_mode(const std::string& text);  ///< "pairwise", "incremental", "simultaneous"
 
