@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Whole surveys, side by side: minemap against 3DTK's slam6D (the paper group's program) on the same
-# simulated surveys, both timed in one run, interleaved. For each survey it writes the survey with
+# simulated surveys, both timed in one run, interleaved. A survey is SCANS:SEED for `minemap
+# simulate` (0 scans: the whole 250 m drive, 64 scans; the default survey is 0:1). For each survey it writes the survey with
 # `minemap simulate`, then runs, REPEATS times each, taking turns:
-#   minemap  `minemap map SURVEY --out OUT --threads THREADS` (minemap's default mode) and the extra
-#            modes given with --minemap-modes
+#   minemap  `minemap map SURVEY --out OUT --threads THREADS` (minemap's default mode), the extra
+#            modes given with --minemap-modes, and its whole-survey mode (`--mode incremental
+#            --reduction voxel --refine-fraction 0`, row "minemap:voxel-metascan")
 #   slam6D   `slam6D -s 0 -e N-1 -f uos -r 10 -O 1 -d 25 -a 1 -t 0 -i 50 --metascan -q SURVEY`
 #            (its fastest configuration that reaches its best accuracy) and, with --slam6d-pairwise,
 #            the same without --metascan
@@ -16,12 +18,12 @@
 # it serially, without its viewers, for a fair single-core figure) and give the path of the slam6D
 # program. Without one the script says so and exits 0 having compared nothing.
 #
-# usage: bench/slam6d_compare.sh --slam6d PATH [--surveys "64:1 64:7 200:1"] [--repeats 3]
+# usage: bench/slam6d_compare.sh --slam6d PATH [--surveys "0:1 0:7 200:1"] [--repeats 3]
 #                                [--threads 2] [--minemap-modes "pairwise"] [--slam6d-pairwise]
 #                                [--out out/bench/slam6d] [--no-build] [--build-dir build]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-slam6d=""; surveys="64:1 64:7 200:1"; repeats=3; threads=2; modes=""; slam_pairwise=0
+slam6d=""; surveys="0:1 0:7 200:1"; repeats=3; threads=2; modes=""; slam_pairwise=0
 out=out/bench/slam6d; build=1; build_dir=build
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -70,7 +72,8 @@ for spec in $surveys; do
   scans="${spec%%:*}"; seed="${spec##*:}"; name="${scans}scans-seed${seed}"
   survey="$work/$name"
   "$build_dir/minemap" simulate --out "$survey" --scans "$scans" --seed "$seed" >/dev/null
-  systems=("minemap:default")
+  scans="$(find "$survey" -maxdepth 1 -name 'scan*.3d' | wc -l)"  # --scans 0: the whole drive
+  systems=("minemap:default" "minemap:voxel-metascan")
   for m in $modes; do systems+=("minemap:$m"); done
   systems+=("slam6d:metascan")
   [ "$slam_pairwise" = 1 ] && systems+=("slam6d:pairwise")
@@ -78,7 +81,12 @@ for spec in $surveys; do
     for system in "${systems[@]}"; do
       kind="${system%%:*}"; mode="${system##*:}"
       if [ "$kind" = minemap ]; then
-        args=(); [ "$mode" != default ] && args=(--mode "$mode")
+        args=()
+        case "$mode" in
+          default) ;;
+          voxel-metascan) args=(--mode incremental --reduction voxel --refine-fraction 0) ;;
+          *) args=(--mode "$mode") ;;
+        esac
         rm -rf "$work/out"
         measured="$(timed "$build_dir/minemap" map "$survey" --out "$work/out" --threads "$threads" --quiet "${args[@]}")"
         errors="$(error_of "$survey" "$work/out")"
@@ -116,10 +124,11 @@ for o in out:
 # Ratios measured side by side: slam6D's metascan time over minemap's default time, per survey.
 for survey in dict.fromkeys(o["survey"] for o in out):
     by = {o["system"]: o for o in out if o["survey"] == survey}
-    if "minemap:default" in by and "slam6d:metascan" in by:
-        ratio = by["slam6d:metascan"]["wall_s"] / by["minemap:default"]["wall_s"]
-        lines.append(f"\n{survey}: minemap (default, {sys.argv[3]} threads) is {ratio:.2f}x slam6D --metascan's speed; "
-                     f"error {by['minemap:default']['mean_error_cm']:.1f} cm vs {by['slam6d:metascan']['mean_error_cm']:.1f} cm")
+    for mine in ("minemap:default", "minemap:voxel-metascan"):
+        if mine in by and "slam6d:metascan" in by:
+            ratio = by["slam6d:metascan"]["wall_s"] / by[mine]["wall_s"]
+            lines.append(f"\n{survey}: {mine} ({sys.argv[3]} threads) is {ratio:.2f}x slam6D --metascan's speed; "
+                         f"error {by[mine]['mean_error_cm']:.1f} cm vs {by['slam6d:metascan']['mean_error_cm']:.1f} cm")
 open(f"{sys.argv[2]}/slam6d.md", "w").write("\n".join(lines) + "\n")
 json.dump(out, open(f"{sys.argv[2]}/slam6d.json", "w"), indent=1)
 print("\n".join(lines))
