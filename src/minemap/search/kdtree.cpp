@@ -1,10 +1,49 @@
 #include "minemap/search/kdtree.hpp"
 
+#include <tbb/parallel_invoke.h>
+
 #include <algorithm>
 #include <bit>
 #include <stdexcept>
 
 namespace minemap {
+
+/// Builds subtrees into its own node and leaf lists. Large subtrees are built in parallel, each
+/// half by its own builder over its own range of points; the right half's lists are then appended
+/// with their indices shifted, which gives the very nodes, leaves and order of a sequential
+/// depth-first build: the tree is the same for any thread count.
+struct KdTree::Builder {
+  /// Subtrees of at least this many points build their halves in parallel (smaller ones are not
+  /// worth a task).
+  static constexpr std::int32_t kParallelPoints = 16384;
+
+  std::vector<KdPoint>& points;
+  const KdTreeSettings& settings;
+  std::vector<KdNode> nodes;
+  std::vector<std::array<float, 4>> leaf_means;
+  int depth = 0;
+
+  /// Builds the subtree over points[begin, end); returns its node and the points' bounds.
+  std::int32_t build(std::int32_t begin, std::int32_t end, int level, float lo[3], float hi[3]);
+  /// Appends `other`'s nodes and leaves after this builder's own.
+  void append(const Builder& other);
+};
+
+void KdTree::Builder::append(const Builder& other) {
+  const auto node_offset = static_cast<std::int32_t>(nodes.size());
+  const auto leaf_offset = static_cast<std::int32_t>(leaf_means.size());
+  for (KdNode node : other.nodes) {
+    if (node.axis == KdNode::kLeaf) {
+      node.split_bits += leaf_offset;  // the leaf index; `a` indexes the shared points
+    } else {
+      node.a += node_offset;
+      node.b += node_offset;
+    }
+    nodes.push_back(node);
+  }
+  leaf_means.insert(leaf_means.end(), other.leaf_means.begin(), other.leaf_means.end());
+  depth = std::max(depth, other.depth);
+}
 
 KdTree::KdTree(std::span<const Eigen::Vector3f> points, const KdTreeSettings& settings) : settings_(settings) {
   if (settings_.bucket_size < 1) throw std::invalid_argument("kd-tree bucket size must be >= 1");
@@ -14,9 +53,13 @@ KdTree::KdTree(std::span<const Eigen::Vector3f> points, const KdTreeSettings& se
     points_[i] = {points[i].x(), points[i].y(), points[i].z(), static_cast<std::int32_t>(i)};
   }
   if (points_.empty()) return;
-  nodes_.reserve(2 * (points_.size() / static_cast<std::size_t>(settings_.bucket_size) + 1));
+  Builder builder{points_, settings_, {}, {}, 0};
+  builder.nodes.reserve(2 * (points_.size() / static_cast<std::size_t>(settings_.bucket_size) + 1));
   float lo[3], hi[3];
-  build(0, static_cast<std::int32_t>(points_.size()), 1, lo, hi);
+  builder.build(0, static_cast<std::int32_t>(points_.size()), 1, lo, hi);
+  nodes_ = std::move(builder.nodes);
+  leaf_means_ = std::move(builder.leaf_means);
+  depth_ = builder.depth;
   bounds_min_ = bounds_max_ = points[0];
   for (const auto& p : points) {
     bounds_min_ = bounds_min_.cwiseMin(p);
@@ -24,16 +67,16 @@ KdTree::KdTree(std::span<const Eigen::Vector3f> points, const KdTreeSettings& se
   }
 }
 
-std::int32_t KdTree::build(std::int32_t begin, std::int32_t end, int depth, float lo[3], float hi[3]) {
-  depth_ = std::max(depth_, depth);
-  const auto node_index = static_cast<std::int32_t>(nodes_.size());
-  nodes_.emplace_back();
+std::int32_t KdTree::Builder::build(std::int32_t begin, std::int32_t end, int level, float lo[3], float hi[3]) {
+  depth = std::max(depth, level);
+  const auto node_index = static_cast<std::int32_t>(nodes.size());
+  nodes.emplace_back();
 
-  lo[0] = hi[0] = points_[begin].x;
-  lo[1] = hi[1] = points_[begin].y;
-  lo[2] = hi[2] = points_[begin].z;
+  lo[0] = hi[0] = points[begin].x;
+  lo[1] = hi[1] = points[begin].y;
+  lo[2] = hi[2] = points[begin].z;
   for (std::int32_t i = begin + 1; i < end; ++i) {
-    const float c[3] = {points_[i].x, points_[i].y, points_[i].z};
+    const float c[3] = {points[i].x, points[i].y, points[i].z};
     for (int d = 0; d < 3; ++d) {
       lo[d] = std::min(lo[d], c[d]);
       hi[d] = std::max(hi[d], c[d]);
@@ -48,12 +91,12 @@ std::int32_t KdTree::build(std::int32_t begin, std::int32_t end, int depth, floa
   auto coordinate = [axis](const KdPoint& p) { return axis == 0 ? p.x : (axis == 1 ? p.y : p.z); };
 
   std::int32_t middle = end;
-  const bool small_enough = end - begin <= settings_.bucket_size;
-  if (!small_enough && depth < kMaxKdDepth) {
+  const bool small_enough = end - begin <= settings.bucket_size;
+  if (!small_enough && level < kMaxKdDepth) {
     middle = static_cast<std::int32_t>(
-        std::partition(points_.begin() + begin, points_.begin() + end,
+        std::partition(points.begin() + begin, points.begin() + end,
                        [&](const KdPoint& p) { return coordinate(p) < split; }) -
-        points_.begin());
+        points.begin());
   }
   // A leaf when small, too deep, or when the cut separates nothing (all points equal on the axis,
   // or the midpoint rounds onto the lower coordinate): duplicates end up in one oversized bucket.
@@ -61,30 +104,40 @@ std::int32_t KdTree::build(std::int32_t begin, std::int32_t end, int depth, floa
     float sum[3] = {0.f, 0.f, 0.f};
     double sum_d[3] = {0.0, 0.0, 0.0};
     for (std::int32_t i = begin; i < end; ++i) {
-      sum_d[0] += points_[i].x;
-      sum_d[1] += points_[i].y;
-      sum_d[2] += points_[i].z;
+      sum_d[0] += points[i].x;
+      sum_d[1] += points[i].y;
+      sum_d[2] += points[i].z;
     }
     const double count = static_cast<double>(end - begin);
     for (int d = 0; d < 3; ++d) sum[d] = static_cast<float>(sum_d[d] / count);
-    const auto leaf_index = static_cast<std::int32_t>(leaf_means_.size());
-    leaf_means_.push_back({sum[0], sum[1], sum[2], static_cast<float>(count)});
+    const auto leaf_index = static_cast<std::int32_t>(leaf_means.size());
+    leaf_means.push_back({sum[0], sum[1], sum[2], static_cast<float>(count)});
     // A bucket of copies of one point (a LiDAR's no-return points at its origin, thousands in a
     // real scan; docs/benchmarks.md) is searched as its first point alone. Every copy is at the
     // same distance and a search keeps the first of equals, so the results do not change; a query
     // near such a pile no longer scans all of it.
-    const KdPoint& first = points_[begin];
+    const KdPoint& first = points[begin];
     bool copies = true;
     for (std::int32_t i = begin + 1; i < end && copies; ++i) {
-      copies = points_[i].x == first.x && points_[i].y == first.y && points_[i].z == first.z;
+      copies = points[i].x == first.x && points[i].y == first.y && points[i].z == first.z;
     }
-    nodes_[node_index] = {KdNode::kLeaf, begin, copies ? 1 : end - begin, leaf_index};
+    nodes[node_index] = {KdNode::kLeaf, begin, copies ? 1 : end - begin, leaf_index};
     return node_index;
   }
   float left_lo[3], left_hi[3], right_lo[3], right_hi[3];
-  const std::int32_t left = build(begin, middle, depth + 1, left_lo, left_hi);
-  const std::int32_t right = build(middle, end, depth + 1, right_lo, right_hi);
-  KdNode& node = nodes_[node_index];
+  std::int32_t left = 0, right = 0;
+  if (end - begin >= kParallelPoints) {
+    Builder right_half{points, settings, {}, {}, 0};
+    std::int32_t right_root = 0;
+    tbb::parallel_invoke([&] { left = build(begin, middle, level + 1, left_lo, left_hi); },
+                         [&] { right_root = right_half.build(middle, end, level + 1, right_lo, right_hi); });
+    right = static_cast<std::int32_t>(nodes.size()) + right_root;
+    append(right_half);
+  } else {
+    left = build(begin, middle, level + 1, left_lo, left_hi);
+    right = build(middle, end, level + 1, right_lo, right_hi);
+  }
+  KdNode& node = nodes[node_index];
   node.axis = axis;
   node.a = left;
   node.b = right;

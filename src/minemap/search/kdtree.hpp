@@ -65,8 +65,7 @@ class KdTree {
   int bucket_size() const { return settings_.bucket_size; }
 
  private:
-  /// Builds the subtree over points_[begin, end); returns its node and the points' bounds.
-  std::int32_t build(std::int32_t begin, std::int32_t end, int depth, float lo[3], float hi[3]);
+  struct Builder;
 
   KdTreeSettings settings_;
   std::vector<KdNode> nodes_;
