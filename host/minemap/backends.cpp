@@ -9,6 +9,14 @@
 #include <stdexcept>
 
 namespace minemap {
+namespace {
+
+std::string lower(std::string text) {
+  std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::tolower(c); });
+  return text;
+}
+
+}  // namespace
 
 const char* to_string(Backend backend) {
   switch (backend) {
@@ -33,8 +41,7 @@ bool built_with_opencl() { return MINEMAP_WITH_OPENCL != 0; }
 opencl::InjectedFault opencl::InjectedFault::parse(const std::string& text) {
   InjectedFault fault;
   if (text.empty()) return fault;
-  std::string value = text;
-  std::transform(value.begin(), value.end(), value.begin(), [](unsigned char c) { return std::tolower(c); });
+  const std::string value = lower(text);
   std::string count = value;
   if (value == "build") {
     fault.kind = Kind::kBuild;
@@ -98,10 +105,6 @@ BackendChoice make_backend(const BackendOptions& options) {
 BackendOptions backend_options_from_environment(Backend kind) {
   BackendOptions options;
   options.kind = kind;
-  const auto lower = [](std::string text) {
-    std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::tolower(c); });
-    return text;
-  };
   if (const char* v = std::getenv("MINEMAP_OPENCL"); v && lower(v) == "off") options.opencl_disabled = true;
   if (const char* v = std::getenv("MINEMAP_OPENCL_DEVICE"); v && *v) options.opencl.device = v;
   if (const char* v = std::getenv("MINEMAP_OPENCL_FP64"); v && lower(v) == "off") options.opencl.fp64 = false;

@@ -17,6 +17,18 @@ std::unique_ptr<ComputeBackend> opencl_backend(const opencl::OpenClOptions* opti
   return make_backend(backend).backend;
 }
 
+std::vector<Pose> poses_of(const MappingResult& result) {
+  std::vector<Pose> poses;
+  for (const auto& s : result.scans) poses.push_back(s.pose_cm);
+  return poses;
+}
+
+std::vector<Pose> odometry_of(const std::vector<Scan>& scans) {
+  std::vector<Pose> poses;
+  for (const auto& s : scans) poses.push_back(s.pose_cm);
+  return poses;
+}
+
 std::unique_ptr<ComputeBackend> backend_named(const std::string& name) {
   if (name == "cpu") return make_cpu_backend();
   if (name == "opencl") return opencl_backend();

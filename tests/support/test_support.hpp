@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "minemap/backend/make_backend.hpp"
+#include "minemap/slam/survey_matching.hpp"
 
 namespace minemap::test {
 
@@ -16,6 +17,11 @@ namespace minemap::test {
 /// applied (the float-sum run sets MINEMAP_OPENCL_FP64=off). Throws without OpenCL, so a test that
 /// asks for it fails, never skips.
 std::unique_ptr<ComputeBackend> opencl_backend(const opencl::OpenClOptions* options = nullptr);
+
+/// The registered poses of a mapping run (pose_cm, scan by scan), and the initial ones of its scans:
+/// what pose_errors compares with ground truth.
+std::vector<Pose> poses_of(const MappingResult& result);
+std::vector<Pose> odometry_of(const std::vector<Scan>& scans);
 
 /// "cpu" or "opencl" (opencl_backend()).
 std::unique_ptr<ComputeBackend> backend_named(const std::string& name);

@@ -8,6 +8,7 @@
 #include "minemap/backend/cpu_backend.hpp"
 #include "minemap/sim/mine_simulator.hpp"
 #include "minemap/slam/survey_matching.hpp"
+#include "test_support.hpp"
 
 namespace minemap {
 namespace {
@@ -19,13 +20,8 @@ TEST(MappingFullSurvey, DefaultSurveyIsWithinTwoPerMilleOfTheDrive) {
   CpuBackend cpu;
   const auto result = map_survey(survey.scans, settings, cpu);
   ASSERT_TRUE(result.all_registered());
-  std::vector<Pose> poses, odometry;
-  for (std::size_t i = 0; i < result.scans.size(); ++i) {
-    poses.push_back(result.scans[i].pose_cm);
-    odometry.push_back(survey.scans[i].pose_cm);
-  }
-  const auto registered = pose_errors(poses, survey.truth_cm);
-  const auto drifted = pose_errors(odometry, survey.truth_cm);
+  const auto registered = pose_errors(test::poses_of(result), survey.truth_cm);
+  const auto drifted = pose_errors(test::odometry_of(survey.scans), survey.truth_cm);
   std::printf("full survey: odometry %.1f cm, simultaneous %.1f cm mean error over %.1f m (%.3f %%), %d relaxation matches\n",
               drifted.mean_translation_cm, registered.mean_translation_cm, registered.path_length_cm / 100.0,
               100.0 * registered.mean_translation_cm / registered.path_length_cm, result.relaxation_matches);

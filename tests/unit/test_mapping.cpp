@@ -24,17 +24,8 @@ sim::SimulatedSurvey small_survey(int scans, std::uint32_t seed = 1) {
   return sim::simulate_mine_survey(settings);
 }
 
-std::vector<Pose> poses_of(const MappingResult& result) {
-  std::vector<Pose> poses;
-  for (const auto& s : result.scans) poses.push_back(s.pose_cm);
-  return poses;
-}
-
-std::vector<Pose> odometry_of(const std::vector<Scan>& scans) {
-  std::vector<Pose> poses;
-  for (const auto& s : scans) poses.push_back(s.pose_cm);
-  return poses;
-}
+using test::odometry_of;
+using test::poses_of;
 
 TEST(MappingSimulatedMine, SimultaneousMatchingIsAccurateAndBeatsPairwise) {
   // The first 24 scans (92 m) of the default survey. (The whole 250 m survey takes minutes; its

@@ -69,13 +69,8 @@ TEST(VoxelFilter, IncrementalMatchingOnVoxelMeansIsAccurate) {
   CpuBackend cpu;
   const auto result = map_survey(survey.scans, settings, cpu);
   ASSERT_TRUE(result.all_registered());
-  std::vector<Pose> poses, odometry;
-  for (std::size_t i = 0; i < result.scans.size(); ++i) {
-    poses.push_back(result.scans[i].pose_cm);
-    odometry.push_back(survey.scans[i].pose_cm);
-  }
-  const auto registered = pose_errors(poses, survey.truth_cm);
-  const auto drifted = pose_errors(odometry, survey.truth_cm);
+  const auto registered = pose_errors(test::poses_of(result), survey.truth_cm);
+  const auto drifted = pose_errors(test::odometry_of(survey.scans), survey.truth_cm);
   std::printf("16 scans, incremental on 15 cm voxel means: %.2f cm (odometry %.2f cm) over %.1f m\n",
               registered.mean_translation_cm, drifted.mean_translation_cm, registered.path_length_cm / 100.0);
   EXPECT_LE(registered.mean_translation_cm, 0.002 * registered.path_length_cm);
