@@ -102,8 +102,9 @@ def table1(out, context, runs):
     if slam:
         lines += ["## 3D SLAM with reduced points & Apx-kD-tree (simultaneous matching, simulated survey)", "",
                   "`cpu` and `opencl` match reduced data against reduced models, as the paper does; "
-                  "`cpu_dense_models` is minemap's default (with Anderson-accelerated ICP; the others run plain ICP), which matches the same reduced data against "
-                  "models that keep every slice (MappingSettings::dense_models).", "",
+                  "`cpu_dense_models` is the paper's relaxation with minemap's ICP (MappingSettings::simultaneous(): Anderson-accelerated, refined at 10 cm), "
+                  "which matches the same reduced data against models that keep every slice; `cpu_default` is minemap's default "
+                  "(MappingSettings{}: 15 cm voxel means matched once against the metascan of 10 cm models).", "",
                   "| backend | scans | time | ICP iterations step 1 / step 3 | relaxation matches | mean error | paper |",
                   "|---|---|---|---|---|---|---|"]
         for k in slam:

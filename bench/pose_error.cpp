@@ -33,10 +33,11 @@ int main(int argc, char** argv) {
     }
     const PoseErrors e = pose_errors(estimated, *survey.truth_cm);
     std::printf("{\"scans\": %zu, \"mean_translation_cm\": %.4f, \"max_translation_cm\": %.4f, "
-                "\"percent_of_path\": %.5f, \"mean_rotation_deg\": %.5f, \"path_cm\": %.2f}\n",
+                "\"percent_of_path\": %.5f, \"mean_rotation_deg\": %.5f, \"path_cm\": %.2f, "
+                "\"mean_step_translation_cm\": %.4f, \"mean_step_rotation_deg\": %.5f}\n",
                 estimated.size(), e.mean_translation_cm, e.max_translation_cm,
                 e.path_length_cm > 0 ? 100.0 * e.mean_translation_cm / e.path_length_cm : 0.0, e.mean_rotation_deg,
-                e.path_length_cm);
+                e.path_length_cm, e.mean_relative_translation_cm, e.mean_relative_rotation_deg);
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "pose_error: %s\n", e.what());

@@ -25,7 +25,7 @@ if [ "${NATIVE:-1}" != "0" ]; then
   cmake -S . -B build-native -DCMAKE_BUILD_TYPE=Release -DMINEMAP_NATIVE=ON -DMINEMAP_BUILD_BENCH=OFF > /dev/null
   cmake --build build-native -j"$jobs" --target test_search test_slice_filter test_mapping test_determinism
   (cd build-native && ctest --output-on-failure -j"$jobs" --timeout 900 \
-     -R '^(Backends/SearchTest\..*|SearchBackends\..*|SliceFilterBackends\..*|MappingBackends\..*|MappingDeterminism\..*|Determinism\..*)$')
+     -R '^(Backends/SearchTest\..*|SearchBackends\..*|SliceFilterBackends\..*|MappingBackends\..*|Presets/MappingBackendsAgree\..*|MappingDeterminism\..*|Determinism\..*)$')
 fi
 fuzz_build_dir=build-fuzz
 if [ "${SANITIZERS:-1}" != "0" ]; then

@@ -29,14 +29,17 @@ using test::run_cli;
 using test::run_cli_with_env;
 using test::TempDir;
 
-/// A 3-scan simulated survey and its `--backend cpu` map, made once per test process.
+/// A 3-scan simulated survey and its `--backend cpu` map, made once per test process. The maps use
+/// `--preset simultaneous`: it runs every kernel (the slice filter too, which the default's voxel
+/// reduction does not), and the injected faults below count its allocations and launches.
 class Faults : public ::testing::Test {
  protected:
+  static constexpr const char* kPreset = " --preset simultaneous";
   static void SetUpTestSuite() {
     dir_ = new TempDir("minemap-faults");
     std::string output;
     ASSERT_EQ(run_cli("simulate --out " + survey() + " --scans 3", &output), 0) << output;
-    ASSERT_EQ(run_cli("map " + survey() + " --out " + out("cpu") + " --backend cpu", &output), 0) << output;
+    ASSERT_EQ(run_cli("map " + survey() + " --out " + out("cpu") + " --backend cpu" + kPreset, &output), 0) << output;
   }
   static void TearDownTestSuite() {
     delete dir_;
@@ -49,7 +52,8 @@ class Faults : public ::testing::Test {
   /// `minemap map` on the survey into out(name), with `environment` set in the child only.
   static int map(const std::string& environment, const std::string& backend, const std::string& name,
                  std::string* output) {
-    return run_cli_with_env(environment, "map " + survey() + " --out " + out(name) + " --backend " + backend, output);
+    return run_cli_with_env(environment, "map " + survey() + " --out " + out(name) + " --backend " + backend + kPreset,
+                            output);
   }
 
   /// Every pose-bearing output (scanNNN.pose, scanNNN.frames, trajectory.tum) equals the CPU run's bytes,

@@ -31,7 +31,7 @@ TEST(MappingSimulatedMine, SimultaneousMatchingIsAccurateAndBeatsPairwise) {
   // The first 24 scans (92 m) of the default survey. (The whole 250 m survey takes minutes; its
   // figures are in docs/benchmarks.md.)
   const auto survey = small_survey(24);
-  MappingSettings settings;
+  MappingSettings settings = MappingSettings::simultaneous();
   CpuBackend cpu;
   settings.mode = MatchingMode::kPairwise;
   const auto pairwise = map_survey(survey.scans, settings, cpu);
@@ -79,9 +79,15 @@ TEST(MappingDeterminism, BitIdenticalPosesRunToRunAndForOneOrTwoThreads) {
   }
 }
 
-TEST(MappingBackends, OpenClAndCpuGiveTheSamePoses) {
+class MappingBackendsAgree : public ::testing::TestWithParam<const char*> {};
+
+// The default (voxel means, metascan) and the paper's relaxation on slice-filtered scans.
+INSTANTIATE_TEST_SUITE_P(Presets, MappingBackendsAgree, ::testing::Values("default", "simultaneous"));
+
+TEST_P(MappingBackendsAgree, OpenClAndCpuGiveTheSamePoses) {
   const auto survey = small_survey(5, 5);
-  MappingSettings settings;
+  const MappingSettings settings =
+      std::string(GetParam()) == "default" ? MappingSettings{} : MappingSettings::simultaneous();
   CpuBackend cpu_backend;
   const auto cpu = map_survey(survey.scans, settings, cpu_backend);
   auto opencl = test::opencl_backend();  // throws without OpenCL: the test fails, never skips

@@ -698,7 +698,7 @@ TEST(SliceFilterSlices, ScanWithoutSlicesIsReturnedUnchangedWithANote) {
   // Mapping says so, once: the note names what was skipped.
   Scan second = scan;
   second.name = "unstructured2";
-  const auto mapped = map_survey({scan, second}, MappingSettings{}, cpu_backend);
+  const auto mapped = map_survey({scan, second}, MappingSettings::simultaneous(), cpu_backend);
   std::string notes;
   for (const auto& note : mapped.notes) notes += note + "\n";
   EXPECT_NE(notes.find("without slice structure: slice filter skipped"), std::string::npos) << notes;

@@ -67,6 +67,7 @@ struct MapOptions {
   fs::path survey;
   fs::path out;
   minemap::Backend backend = minemap::Backend::kAuto;
+  std::string preset = "default";  // applied before parsing (preset_argument)
   bool no_filter = false;
   bool sparse_models = false;
   bool plain_icp = false;
@@ -77,6 +78,24 @@ struct MapOptions {
   bool quiet = false;
   bool write_unregistered = false;
 };
+
+/// The value of `--preset` anywhere on the command line ("default" when absent or malformed: the
+/// parser then reports the malformed one).
+std::string preset_argument(int argc, char** argv) {
+  std::string preset = "default";
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--preset" && i + 1 < argc) preset = argv[i + 1];
+    if (arg.rfind("--preset=", 0) == 0) preset = arg.substr(9);
+  }
+  return preset;
+}
+
+minemap::MappingSettings preset_settings(const std::string& preset) {
+  if (preset == "simultaneous") return minemap::MappingSettings::simultaneous();
+  if (preset == "paper") return minemap::MappingSettings::paper();
+  return {};
+}
 
 int run_simulate(const SimulateOptions& options) {
   minemap::sim::SimulationSettings settings;
@@ -243,7 +262,10 @@ int main(int argc, char** argv) {
   simulate->add_option("--seed", sim.seed, "Random seed");
 
   MapOptions map;
-  minemap::MappingSettings mapping;  // the library's defaults, shown by --help
+  // The library's defaults, shown by --help; --preset picks another starting point, so it is read
+  // before the options that adjust it are bound (they then show the preset's values too).
+  const std::string preset = preset_argument(argc, argv);
+  minemap::MappingSettings mapping = preset_settings(preset);
   minemap::SliceFilterSettings& filter = mapping.filter;
   minemap::IcpSettings& icp = mapping.icp;
   auto* map_cmd = app.add_subcommand("map", "Register a survey into one consistent map");
@@ -258,6 +280,11 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember(names))
         ->default_str(minemap::to_string(value));
   };
+  map_cmd->add_option("--preset", map.preset,
+                      "default (whole-survey: voxel means, metascan) | simultaneous (the paper's relaxation, minemap's "
+                      "ICP) | paper (as published); the options below adjust it")
+      ->check(CLI::IsMember(std::vector<std::string>{"default", "simultaneous", "paper"}))
+      ->default_str("default");
   add_choice("--mode", mapping.mode, minemap::parse_matching_mode, {"pairwise", "incremental", "simultaneous"},
              "How scans are matched (the paper's section IV.B)");
   add_choice("--search", icp.method, minemap::parse_search_method, {"kd", "apx", "brute"},
@@ -266,6 +293,7 @@ int main(int argc, char** argv) {
   add_choice("--reduction", mapping.reduction, minemap::parse_reduction, {"slices", "voxel"},
              "slices (the paper's slice filter) | voxel (the mean of each --voxel-cm cell, every scan)");
   map_cmd->add_option("--voxel-cm", mapping.voxel_cm, "Voxel size of --reduction voxel")->capture_default_str();
+  map_cmd->add_option("--model-voxel-cm", mapping.model_voxel_cm, "Voxel size of the models of --reduction voxel (0 = the data)")->capture_default_str();
   map_cmd->add_flag("--no-filter", map.no_filter, "Skip the slice filter (median + reduction + every 3rd slice)");
   map_cmd->add_option("--max-pair-dist-cm", icp.max_pair_dist_cm, "Maximum point-pair distance")->capture_default_str();
   map_cmd->add_option("--refine-fraction", icp.refine_pair_dist_fraction,

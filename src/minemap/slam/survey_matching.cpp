@@ -6,6 +6,8 @@
 #include <deque>
 #include <stdexcept>
 
+#include <tbb/parallel_for.h>
+
 #include "minemap/backend/cpu_backend.hpp"
 #include "minemap/filter/voxel_filter.hpp"
 
@@ -50,6 +52,20 @@ class SurveyMatcher {
   void prepare_all() {
     states_.resize(scans_.size());
     result_.scans.resize(scans_.size());
+    // Voxel means are a host computation (the same bits for every backend), one scan per task.
+    std::vector<std::vector<Eigen::Vector3f>> voxel_data, voxel_models;
+    if (settings_.reduction == Reduction::kVoxel) {
+      const auto start = Clock::now();
+      voxel_data.resize(scans_.size());
+      voxel_models.resize(scans_.size());
+      const bool models = settings_.dense_models && settings_.model_voxel_cm > 0.0f &&
+                          settings_.model_voxel_cm < settings_.voxel_cm;
+      tbb::parallel_for(std::size_t{0}, scans_.size(), [&](std::size_t i) {
+        voxel_data[i] = voxel_mean_filter(scans_[i].points_cm, settings_.voxel_cm);
+        if (models) voxel_models[i] = voxel_mean_filter(scans_[i].points_cm, settings_.model_voxel_cm);
+      });
+      result_.times.filter_s += seconds_since(start);
+    }
     for (std::size_t i = 0; i < scans_.size(); ++i) {
       const Scan& scan = scans_[i];
       ScanOutcome& outcome = result_.scans[i];
@@ -61,7 +77,7 @@ class SurveyMatcher {
       auto start = Clock::now();
       std::vector<Eigen::Vector3f> points;
       if (settings_.reduction == Reduction::kVoxel) {
-        points = voxel_mean_filter(scan.points_cm, settings_.voxel_cm);
+        points = std::move(voxel_data[i]);
       } else if (scan.has_slices() && settings_.filter_enabled) {
         SliceFilterResult filtered = backend_.filter_slices(scan, settings_.filter);
         outcome.outliers_replaced = filtered.outliers_replaced;
@@ -77,7 +93,8 @@ class SurveyMatcher {
       std::vector<Eigen::Vector3f> model_points;
       bool dense_model = false;
       if (settings_.reduction == Reduction::kVoxel) {
-        // the data clouds are the models
+        dense_model = !voxel_models[i].empty();
+        model_points = std::move(voxel_models[i]);
       } else if (settings_.dense_models && scan.has_slices() && settings_.filter_enabled &&
           settings_.model_slice_stride < settings_.filter.slice_stride) {
         SliceFilterSettings model_filter = settings_.filter;
@@ -181,13 +198,23 @@ class SurveyMatcher {
     // previous scan, so its float coordinates stay small wherever the survey is.
     const Pose frame = states_[i - 1].pose;
     const Pose frame_inverse = rigid_inverse(frame);
+    // Only model points that the new scan can reach: inside its box at the predicted pose, grown by
+    // the pair bound and the largest correction expected (metascan_margin_cm). In a tunnel the
+    // nearby scans hold about ten times the points that lie there (docs/benchmarks.md).
     std::vector<Eigen::Vector3f> union_points;
+    const KdTree& own = states_[i].cloud->tree();
+    const std::array<Eigen::Vector3f, 2> corners = {own.bounds_min(), own.bounds_max()};
+    const Bounds3d reach = world_bounds(corners, frame_inverse * states_[i].pose);
+    const double grow_cm = settings_.icp.max_pair_dist_cm + settings_.metascan_margin_cm;
+    const Eigen::Vector3d reach_min = reach.min_cm.array() - grow_cm, reach_max = reach.max_cm.array() + grow_cm;
     for (std::size_t j : nearby(i, i)) {
       const Pose to_frame = frame_inverse * states_[j].pose;
       const Eigen::Matrix3d rotation = to_frame.block<3, 3>(0, 0);
       const Eigen::Vector3d translation = to_frame.block<3, 1>(0, 3);
       for (const Eigen::Vector3f& p : states_[j].model_cloud->points()) {
-        union_points.push_back((rotation * p.cast<double>() + translation).cast<float>());
+        const Eigen::Vector3d q = rotation * p.cast<double>() + translation;
+        if ((q.array() < reach_min.array()).any() || (q.array() > reach_max.array()).any()) continue;
+        union_points.push_back(q.cast<float>());
       }
     }
     const auto metascan = backend_.prepare(std::move(union_points), settings_.tree);
@@ -320,6 +347,12 @@ void MappingSettings::validate() const {
   if (max_relaxation_matches_per_scan < 0) throw std::invalid_argument("the relaxation cap must be >= 0");
   if (reduction == Reduction::kVoxel && (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm))) {
     throw std::invalid_argument("the voxel size must be a finite length > 0 cm");
+  }
+  if (!(model_voxel_cm >= 0.0f) || !std::isfinite(model_voxel_cm)) {
+    throw std::invalid_argument("the model voxel size must be a finite length >= 0 cm");
+  }
+  if (!(metascan_margin_cm >= 0.0) || !std::isfinite(metascan_margin_cm)) {
+    throw std::invalid_argument("the metascan margin must be a finite length >= 0 cm");
   }
 }
 

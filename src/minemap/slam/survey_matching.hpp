@@ -1,18 +1,21 @@
 #pragma once
-// Matching many scans (paper, section IV.B): pairwise, incremental (against the metascan of all
-// registered scans) and simultaneous matching, the queue-based global relaxation:
-//  1. a new scan is matched pairwise, starting from odometry corrected by the previous scan's
-//     correction;
-//  2. a queue is initialised with the new scan;
-//  3. until the queue is empty: the front scan (unless it is the master, scan 0, which is fixed) is
-//     matched against the union of all scans overlapping it (overlap: more than 250 point pairs);
-//     if that moved it, each neighbour not in the queue is appended.
-// The union is searched through each neighbour's own kd-tree (no tree of the union is rebuilt);
-// neighbour candidates are prefiltered by world bounds, so finding them costs one pairing pass per
-// nearby scan, not an ICP run per scan pair.
+// Matching many scans (paper, section IV.B): pairwise, incremental and simultaneous matching.
+//  * pairwise: scan i against scan i-1, from odometry corrected by scan i-1's correction.
+//  * incremental (minemap's default): scan i against the metascan, one kd-tree of the registered
+//    scans near it (cropped to what scan i can reach), as 3DTK's slam6D `--metascan` does.
+//  * simultaneous, the paper's queue-based global relaxation:
+//    1. a new scan is matched pairwise;
+//    2. a queue is initialised with the new scan;
+//    3. until the queue is empty: the front scan (unless it is the master, scan 0, which is fixed)
+//       is matched against the union of all scans overlapping it (overlap: more than 250 point
+//       pairs); if that moved it, each neighbour not in the queue is appended.
+//    The union is searched through each neighbour's own kd-tree (no tree of the union is rebuilt);
+//    neighbour candidates are prefiltered by world bounds, so finding them costs one pairing pass
+//    per nearby scan, not an ICP run per scan pair.
 //
 // The search, the sums and the slice filter run in the compute backend the caller hands in
-// (backend/compute_backend.hpp); Horn's method and this relaxation run on the host.
+// (backend/compute_backend.hpp); the voxel reduction, Horn's method and the matching schedule run
+// on the host.
 #include <chrono>
 #include <functional>
 #include <optional>
@@ -40,29 +43,38 @@ Reduction parse_reduction(const std::string& text);  ///< "slices", "voxel"
 const char* to_string(MatchingMode mode);
 MatchingMode parse_matching_mode(const std::string& text);  ///< "pairwise", "incremental", "simultaneous"
 
-/// Everything map_survey takes. MappingSettings{} is minemap's default (the figures behind each
-/// choice are in docs/benchmarks.md); paper() is the paper's method as published.
+/// Everything map_survey takes. MappingSettings{} is minemap's default, the whole-survey mode: each
+/// scan, reduced to 15 cm voxel means, is matched once against the metascan of the registered scans
+/// near it (10 cm voxel means), with the mapping ICP (25 cm, then 7.5 cm). simultaneous() is the
+/// paper's queue-based relaxation on slice-filtered scans with minemap's ICP (the default before
+/// 2026-12); paper() is the paper's method as published. The figures behind each choice, and
+/// against 3DTK's slam6D, are in docs/benchmarks.md.
 /// Thread-safety: a plain value.
 struct MappingSettings {
-  MatchingMode mode = MatchingMode::kSimultaneous;
-  bool filter_enabled = true;             ///< the slice filter (scans with slices)
+  MatchingMode mode = MatchingMode::kIncremental;
+  bool filter_enabled = true;             ///< the slice filter (reduction kSlices, scans with slices)
   SliceFilterSettings filter;
-  /// kVoxel reduces every scan, sliced or not, to voxel means; its models are its data clouds
-  /// (dense_models and the slice filter do not apply).
-  Reduction reduction = Reduction::kSlices;
-  float voxel_cm = 15.0f;
-  int unstructured_point_stride = 1;      ///< scans without slices: keep every n-th point
+  /// kVoxel reduces every scan, sliced or not, to voxel means (the slice filter does not apply).
+  Reduction reduction = Reduction::kVoxel;
+  float voxel_cm = 15.0f;                 ///< kVoxel: the data's voxel size
+  /// kVoxel with dense_models: models are the voxel means at this finer size (0 or >= voxel_cm:
+  /// the data clouds themselves).
+  float model_voxel_cm = 10.0f;
+  int unstructured_point_stride = 1;      ///< kSlices, scans without slices: keep every n-th point
   KdTreeSettings tree;
-  /// Coarse-to-fine (25 cm, then 10 cm) and Anderson-accelerated; paper(): plain, 25 cm only.
-  IcpSettings icp = IcpSettings::mapping();
+  /// Coarse-to-fine (25 cm, then 7.5 cm) and Anderson-accelerated; paper(): plain, 25 cm only.
+  IcpSettings icp = mapping_icp();
   /// Models (the scans a scan is matched *against*) may be denser than the data being matched, as
   /// in KISS-ICP's double downsampling: a pair then measures the distance to the other scan's
-  /// surface rather than to its 10 cm sampling, which removes much of point-to-point ICP's bias on
-  /// reduced data. On: a model keeps every `model_slice_stride`-th slice, filtered otherwise as
-  /// `filter` says (scans without slices: every point); the data keeps the paper's reduction.
-  /// Off: models are the data clouds, as in the paper.
+  /// surface rather than to its sampling, which removes much of point-to-point ICP's bias on
+  /// reduced data. kVoxel: models are model_voxel_cm means. kSlices: a model keeps every
+  /// `model_slice_stride`-th slice, filtered otherwise as `filter` says (scans without slices:
+  /// every point). Off: models are the data clouds, as in the paper.
   bool dense_models = true;
   int model_slice_stride = 1;
+  /// kIncremental: the metascan keeps the model points within the new scan's box (at its predicted
+  /// pose) grown by the pair bound and this: the largest correction ICP is expected to make.
+  double metascan_margin_cm = 200.0;
   /// The paper: scans overlap iff more than this many pairs. ICP's own minimum (icp.termination.
   /// min_pairs) never exceeds it in mapping: a pair of scans that overlaps can be registered.
   int min_overlap_pairs = 250;
@@ -70,9 +82,25 @@ struct MappingSettings {
   double moved_rotation_deg = 0.25;       ///< ...or this
   int max_relaxation_matches_per_scan = 0;  ///< cap on step-3 matches after one new scan; 0 = 4 x scans so far
 
-  /// The paper's method: models reduced like the data, plain ICP at 25 cm (Table I's rows).
-  static MappingSettings paper() {
+  /// minemap's mapping ICP: IcpSettings::mapping() refined at 7.5 cm (0.3 x 25 cm).
+  static IcpSettings mapping_icp() {
+    IcpSettings icp = IcpSettings::mapping();
+    icp.refine_pair_dist_fraction = 0.3f;
+    return icp;
+  }
+  /// The paper's simultaneous matching (queue-based relaxation) of slice-filtered scans against
+  /// dense models, with minemap's ICP.
+  static MappingSettings simultaneous() {
     MappingSettings settings;
+    settings.mode = MatchingMode::kSimultaneous;
+    settings.reduction = Reduction::kSlices;
+    settings.icp = IcpSettings::mapping();
+    return settings;
+  }
+  /// The paper's method: simultaneous matching, slice filter, models reduced like the data, plain
+  /// ICP at 25 cm (Table I's rows).
+  static MappingSettings paper() {
+    MappingSettings settings = simultaneous();
     settings.icp = IcpSettings::paper();
     settings.dense_models = false;
     return settings;
