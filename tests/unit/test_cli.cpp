@@ -15,6 +15,7 @@ namespace {
 
 using test::run_cli;
 using test::TempDir;
+using test::lines_containing;
 
 TEST(Cli, SimulateThenMapWritesEveryOutputAndReportsTruthErrors) {
   TempDir dir;
@@ -58,6 +59,26 @@ TEST(Cli, BadInputNamesFileAndLineAndLeavesTheOutputFolderAsItWas) {
   for (const auto& entry : std::filesystem::directory_iterator(dir / "out")) names.push_back(entry.path().filename());
   EXPECT_EQ(names, std::vector<std::string>{"keep.txt"});
   EXPECT_EQ(test::read_text(dir / "out" / "keep.txt"), "previous result");
+}
+
+TEST(Cli, ADoubtfulRegistrationIsNamedWrittenAndExits13UnlessAccepted) {
+  // The LiDAR pair from the identity: 0.5 m apart, twice the default 25 cm bound's reach.
+  TempDir dir;
+  const std::string survey = (test::shared_data_dir() / "fast_gicp_pair").string();
+  std::string output;
+  ASSERT_EQ(run_cli("map " + survey + " --out " + (dir / "out").string() + " --backend cpu --quiet", &output), 13)
+      << output;
+  const auto named = lines_containing(output, "scan 251371071 registered, but doubtful: the match moved its points");
+  EXPECT_EQ(named.size(), 1u) << output;
+  EXPECT_EQ(lines_containing(output, "1 of 2 scans doubtful").size(), 1u) << output;
+  std::ifstream in(dir / "out" / "report.json");
+  const auto report = nlohmann::json::parse(in);
+  EXPECT_EQ(report["doubtful_scans"], nlohmann::json::array({"251371071"}));
+  EXPECT_FALSE(report["scans"][1]["health"]["trusted"].get<bool>());
+  EXPECT_EQ(run_cli("map " + survey + " --out " + (dir / "accepted").string() + " --backend cpu --quiet --accept-doubtful",
+                    &output), 0) << output;
+  EXPECT_EQ(run_cli("map " + survey + " --out " + (dir / "wide").string() + " --backend cpu --quiet --max-pair-dist-cm 100",
+                    &output), 0) << output;
 }
 
 TEST(Cli, UsageAndBackendErrorsHaveTheirOwnExitCodes) {

@@ -23,6 +23,9 @@ enum class ExitCode : int {
   kInconsistentSurvey = 10,  ///< duplicate scans, a missing pose file, pose and scan counts that differ
   kCountBeyondLimits = 11,   ///< a header count beyond the limits (ReadSettings::max_points), checked before allocating
   kSuspiciousUnits = 12,     ///< the survey looks like metres read as cm: map it with --unit m (or --unit cm)
+  kDoubtfulMap = 13,         ///< every scan registered, but a match failed the health check (registration/
+                             ///< health.hpp): the outputs are written, the scans are named (console and
+                             ///< report.json); --accept-doubtful makes it 0
   kInterrupted = 130,        ///< SIGINT: finished outputs are kept, temp files removed
 };
 

@@ -77,6 +77,7 @@ struct MapOptions {
   bool right_handed_to_3dtk = false;
   bool quiet = false;
   bool write_unregistered = false;
+  bool accept_doubtful = false;
 };
 
 /// The value of `--preset` anywhere on the command line ("default" when absent or malformed: the
@@ -205,6 +206,13 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
     }
   }
 
+  // Registered but judged doubtful (registration/health.hpp): written, named, and a distinct exit code.
+  const std::vector<std::size_t> doubtful = result.doubtful();
+  for (const std::size_t i : doubtful) {
+    std::fprintf(stderr, "minemap: %s: scan %s registered, but doubtful: %s\n", survey.scans[i].source_path.c_str(),
+                 result.scans[i].name.c_str(), result.scans[i].health.doubt.c_str());
+  }
+
   MapOutputSettings output;
   output.unit = survey.unit;
   output.up_axis = (survey.format == "uos" || options.right_handed_to_3dtk) ? 1 : 2;
@@ -232,7 +240,15 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
     std::printf("wrote %s (frames, poses, trajectory.tum, map.ply, report.json, top.png, side.png)\n",
                 options.out.c_str());
   }
-  return failed ? exit_code(ExitCode::kRegistrationFailed) : 0;
+  if (failed) return exit_code(ExitCode::kRegistrationFailed);
+  if (!doubtful.empty()) {
+    std::fprintf(stderr,
+                 "minemap: %zu of %zu scans doubtful (report.json: doubtful_scans); the map in %s may be wrong there%s\n",
+                 doubtful.size(), result.scans.size(), options.out.c_str(),
+                 options.accept_doubtful ? " (accepted: --accept-doubtful)" : "; --accept-doubtful exits 0 anyway");
+    if (!options.accept_doubtful) return exit_code(ExitCode::kDoubtfulMap);
+  }
+  return 0;
 }
 
 }  // namespace
@@ -334,6 +350,8 @@ int main(int argc, char** argv) {
   map_cmd->add_option("--initial-poses", map.initial_poses, "Initial poses (TUM, KITTI, 4x4 or graph file)");
   map_cmd->add_flag("--right-handed-to-3dtk", map.right_handed_to_3dtk, "Convert right-handed input to 3DTK's frame");
   map_cmd->add_flag("--quiet", map.quiet, "Print nothing but errors");
+  map_cmd->add_flag("--accept-doubtful", map.accept_doubtful,
+                    "Exit 0 even when a match was judged doubtful (still named on stderr and in report.json)");
   map_cmd->add_flag("--write-unregistered", map.write_unregistered,
                     "Write the outputs even when a scan could not be registered (exit code 4 still)");
 

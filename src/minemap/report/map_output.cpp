@@ -98,6 +98,8 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
                         {"filter", settings.filter_enabled},
                         {"reduction", to_string(settings.reduction)},
                         {"voxel_cm", settings.voxel_cm},
+                        {"model_voxel_cm", settings.model_voxel_cm},
+                        {"metascan_margin_cm", settings.metascan_margin_cm},
                         {"median_window", settings.filter.median_window},
                         {"outlier_threshold_cm", settings.filter.outlier_threshold_cm},
                         {"min_point_spacing_cm", settings.filter.min_point_spacing_cm},
@@ -119,8 +121,24 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
                      {"points_in", s.points_in},
                      {"points_used", s.points_used},
                      {"outliers_replaced", s.outliers_replaced}});
+    if (s.health.judged) {
+      const RegistrationHealth& h = s.health;
+      scans.back()["health"] = {{"trusted", !h.doubtful()},
+                                {"doubt", h.doubt},
+                                {"paired_fraction", h.paired_fraction},
+                                {"beyond_bound_fraction", h.beyond_bound_fraction},
+                                {"edge_fraction", h.edge_fraction},
+                                {"rms", h.rms_cm * unit_per_cm},
+                                {"correction", h.correction_cm * unit_per_cm},
+                                {"correction_deg", h.correction_deg},
+                                {"moved", h.moved_cm * unit_per_cm},
+                                {"pair_bound", h.pair_bound_cm * unit_per_cm}};
+    }
   }
   report["scans"] = scans;
+  nlohmann::json doubtful = nlohmann::json::array();
+  for (const std::size_t i : result.doubtful()) doubtful.push_back(result.scans[i].name);
+  report["doubtful_scans"] = doubtful;
   report["icp_iterations"] = {{"step1", result.step1_icp_iterations}, {"step3", result.step3_icp_iterations}};
   report["relaxation_matches"] = result.relaxation_matches;
   const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

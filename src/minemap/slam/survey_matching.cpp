@@ -122,6 +122,12 @@ class SurveyMatcher {
     }
   }
 
+  /// Judges scan i's match (from `start` to its current pose) against `models`.
+  void judge(std::size_t i, const Pose& start, std::span<const WorldModel> models) {
+    result_.scans[i].health = judge_registration(backend_, *states_[i].cloud, states_[i].pose, start, models, icp_,
+                                                 settings_.health);
+  }
+
   void set_pose(std::size_t i, const Pose& world_from_points, const IcpResult& match) {
     states_[i].pose = world_from_points;
     ScanOutcome& outcome = result_.scans[i];
@@ -137,6 +143,7 @@ class SurveyMatcher {
     ScanOutcome& outcome = result_.scans[i];
     outcome.registered = false;
     outcome.last_match = match;
+    outcome.health = {};
     outcome.failure = std::string(to_string(match.stop)) + " (" + std::to_string(match.pairs) + " pairs)";
   }
 
@@ -181,6 +188,7 @@ class SurveyMatcher {
     result_.step1_icp_iterations += match.iterations();
     if (match.ok()) {
       set_pose(i, match.world_from_data, match);
+      judge(i, start, models);
     } else {
       result_.scans[i].pose_cm = start * states_[i].points_from_file;
       result_.scans[i].world_from_points = start;
@@ -219,10 +227,12 @@ class SurveyMatcher {
     }
     const auto metascan = backend_.prepare(std::move(union_points), settings_.tree);
     const WorldModel model{metascan.get(), frame};
-    const IcpResult match = register_icp(backend_, *states_[i].cloud, states_[i].pose, {&model, 1}, icp_);
+    const Pose start = states_[i].pose;
+    const IcpResult match = register_icp(backend_, *states_[i].cloud, start, {&model, 1}, icp_);
     result_.step1_icp_iterations += match.iterations();
     if (match.ok()) {
       set_pose(i, match.world_from_data, match);
+      judge(i, start, {&model, 1});
     } else {
       result_.scans[i].pose_cm = states_[i].pose * states_[i].points_from_file;
       result_.scans[i].world_from_points = states_[i].pose;
@@ -260,6 +270,7 @@ class SurveyMatcher {
       result_.step3_icp_iterations += match.iterations();
       if (!match.ok()) continue;  // keep the pose it had; a failed relaxation step moves nothing
       set_pose(current, match.world_from_data, match);
+      judge(current, before, models);
       const Pose change = rigid_inverse(before) * match.world_from_data;
       const bool moved = translation_norm(change) > settings_.moved_translation_cm ||
                          rotation_angle_deg(change) > settings_.moved_rotation_deg;
@@ -337,6 +348,14 @@ bool MappingResult::all_registered() const {
   return std::all_of(scans.begin(), scans.end(), [](const ScanOutcome& s) { return s.registered; });
 }
 
+std::vector<std::size_t> MappingResult::doubtful() const {
+  std::vector<std::size_t> out;
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    if (scans[i].registered && scans[i].health.doubtful()) out.push_back(i);
+  }
+  return out;
+}
+
 void MappingSettings::validate() const {
   filter.validate();
   icp.validate();
@@ -345,6 +364,7 @@ void MappingSettings::validate() const {
   if (model_slice_stride < 1) throw std::invalid_argument("model slice stride must be >= 1");
   if (min_overlap_pairs < 0) throw std::invalid_argument("the overlap threshold must be >= 0 pairs");
   if (max_relaxation_matches_per_scan < 0) throw std::invalid_argument("the relaxation cap must be >= 0");
+  health.validate();
   if (reduction == Reduction::kVoxel && (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm))) {
     throw std::invalid_argument("the voxel size must be a finite length > 0 cm");
   }

@@ -27,6 +27,7 @@
 #include "minemap/core/scan.hpp"
 #include "minemap/filter/slice_filter.hpp"
 #include "minemap/io/formats.hpp"
+#include "minemap/registration/health.hpp"
 #include "minemap/registration/icp.hpp"
 
 namespace minemap {
@@ -81,6 +82,8 @@ struct MappingSettings {
   double moved_translation_cm = 5.0;      ///< step 3c: a match "moved" the scan beyond this...
   double moved_rotation_deg = 0.25;       ///< ...or this
   int max_relaxation_matches_per_scan = 0;  ///< cap on step-3 matches after one new scan; 0 = 4 x scans so far
+  /// Every match is judged (registration/health.hpp); a doubtful one is named in ScanOutcome::health.
+  HealthSettings health;
 
   /// minemap's mapping ICP: IcpSettings::mapping() refined at 7.5 cm (0.3 x 25 cm).
   static IcpSettings mapping_icp() {
@@ -116,6 +119,7 @@ struct ScanOutcome {
   Pose initial_pose_cm = Pose::Identity();  ///< the odometry pose it started from
   std::vector<io::FrameLine> frames;        ///< every pose it took, 3DTK .frames style (last = final)
   IcpResult last_match;                     ///< the last ICP run that moved it (pairwise or relaxation)
+  RegistrationHealth health;                ///< how far last_match can be trusted
   int relaxation_matches = 0;               ///< step-3 matches of this scan
   std::size_t points_in = 0;                ///< points read
   std::size_t points_used = 0;              ///< points after filtering, used for matching
@@ -140,6 +144,8 @@ struct MappingResult {
   int step3_icp_iterations = 0;  ///< Table I: ICP iterations of the relaxation
   int relaxation_matches = 0;
   bool all_registered() const;
+  /// Indices of the registered scans whose last match was judged doubtful (ScanOutcome::health).
+  std::vector<std::size_t> doubtful() const;
 };
 
 /// Reports progress: scans done of total, and a short phase name.

@@ -1,0 +1,67 @@
+#pragma once
+// Whether a registration can be trusted. ICP always ends somewhere: started outside its pair
+// bound's reach, it settles in a wrong minimum with a small residual (a car LiDAR pair 0.86 m apart
+// matched at 25 cm "found" 6.6 cm of motion). The residual alone cannot tell, so a match is judged
+// by where the data's closest model points lie at the final pose, searched out to a wider bound:
+//  * paired fraction: data points with a model point within the pair bound. Low: little overlap.
+//  * beyond-bound fraction: of the data points with a model point within wide_factor x the bound,
+//    those whose closest one lies beyond the bound. Right, the surfaces coincide and such points
+//    are only where one scan sees what the other does not; stuck short of the right pose, the
+//    surfaces sit apart and many counterparts lie just beyond the bound.
+//  * edge fraction: of the pairs within the bound, those in its outer half. Right, pair distances
+//    crowd near zero (sensor noise); wrong, they spread across the whole bound.
+//  * reach: how far the match moved the paired data points (RMS, start to end) in multiples of
+//    the bound. ICP finds what lies within its bound's reach; a scan moved much farther started out
+//    of reach, and a bound wide enough to let it (metres) also pairs a street's ground with any
+//    shifted copy of itself: the figures above then look fine while the pose is metres off.
+// The thresholds are in HealthSettings; docs/benchmarks.md has the figures they come from
+// (simulated surveys, the real LiDAR in ../shared/data, right and deliberately wrong starts).
+//
+// Thread-safety: judge_registration uses the backend (one thread at a time, as every backend call).
+#include <span>
+#include <string>
+
+#include "minemap/backend/compute_backend.hpp"
+#include "minemap/core/pose.hpp"
+#include "minemap/registration/icp.hpp"
+
+namespace minemap {
+
+/// When a match is doubtful. One source of truth for the thresholds; a plain value.
+struct HealthSettings {
+  bool enabled = true;
+  float wide_factor = 4.0f;                 ///< the wide search bound, in multiples of the pair bound
+  double min_paired_fraction = 0.10;        ///< fewer data points paired: the scans hardly overlap
+  double max_beyond_bound_fraction = 0.35;  ///< more counterparts just beyond the bound: surfaces apart
+  /// More pairs in the bound's outer half: not settled onto a surface. Loose, because a model seen
+  /// from far away is sampled sparsely and its right pairs lie farther apart (38% in the outer half
+  /// for two simulated scans 8 m apart, within 0.3 cm of the truth).
+  double max_edge_fraction = 0.5;
+  double max_reach = 1.5;                   ///< data points moved farther (RMS) than this many bounds: started out of reach
+  /// Throws std::invalid_argument naming the bad setting.
+  void validate() const;
+};
+
+/// The figures of one judged match, and the verdict.
+struct RegistrationHealth {
+  bool judged = false;             ///< false: not judged (the master scan, an unregistered scan, or judging off)
+  std::size_t data_points = 0;
+  double paired_fraction = 0.0;
+  double beyond_bound_fraction = 0.0;
+  double edge_fraction = 0.0;
+  double rms_cm = 0.0;             ///< RMS distance of the pairs within the bound
+  double correction_cm = 0.0;      ///< how far the match moved the scan from where it started...
+  double correction_deg = 0.0;     ///< ...and how far it turned it
+  double moved_cm = 0.0;           ///< RMS distance the paired data points moved, start to end
+  float pair_bound_cm = 0.0f;      ///< the bound it was judged at (the match's own)
+  std::string doubt;               ///< empty: trusted; otherwise which test failed, with its figures
+  bool doubtful() const { return judged && !doubt.empty(); }
+};
+
+/// Judges `data` at `world_from_data` (moved there from `start`) against `models`, at the pair
+/// bound `icp.max_pair_dist_cm` (exact search).
+RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
+                                      const Pose& start, std::span<const WorldModel> models, const IcpSettings& icp,
+                                      const HealthSettings& settings);
+
+}  // namespace minemap
