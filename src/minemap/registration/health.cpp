@@ -13,6 +13,7 @@ void HealthSettings::validate() const {
     if (!(f >= 0.0 && f <= 1.0)) throw std::invalid_argument("health: fractions must lie in [0, 1]");
   }
   if (!(max_reach > 0.0) || std::isnan(max_reach)) throw std::invalid_argument("health: max_reach must be > 0");
+  if (probe_stride < 1) throw std::invalid_argument("health: probe_stride must be >= 1");
 }
 
 RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,

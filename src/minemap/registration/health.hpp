@@ -31,6 +31,8 @@ namespace minemap {
 struct HealthSettings {
   bool enabled = true;
   float wide_factor = 4.0f;                 ///< the wide search bound, in multiples of the pair bound
+  /// Mapping judges every n-th data point (the wide search costs several ICP iterations per point).
+  int probe_stride = 4;
   double min_paired_fraction = 0.10;        ///< fewer data points paired: the scans hardly overlap
   double max_beyond_bound_fraction = 0.35;  ///< more counterparts just beyond the bound: surfaces apart
   /// More pairs in the bound's outer half: not settled onto a surface. Loose, because a model seen

@@ -21,6 +21,7 @@ double seconds_since(Clock::time_point start) { return std::chrono::duration<dou
 struct ScanState {
   std::shared_ptr<const PreparedCloud> cloud;        ///< data: matched against others
   std::shared_ptr<const PreparedCloud> model_cloud;  ///< model: others are matched against it (may be `cloud`)
+  std::shared_ptr<const PreparedCloud> probe;        ///< every health.probe_stride-th data point: what judging searches
   Pose odometry = Pose::Identity();  ///< initial T_world_points
   Pose pose = Pose::Identity();      ///< current T_world_points
   Pose points_from_file = Pose::Identity();
@@ -113,6 +114,15 @@ class SurveyMatcher {
       outcome.used_points_cm = points;
       state.cloud = backend_.prepare(std::move(points), settings_.tree);
       state.model_cloud = dense_model ? backend_.prepare(std::move(model_points), settings_.tree) : state.cloud;
+      const std::size_t stride = static_cast<std::size_t>(settings_.health.probe_stride);
+      if (settings_.health.enabled && stride > 1) {
+        std::vector<Eigen::Vector3f> probe;
+        const auto data = state.cloud->points();
+        for (std::size_t k = 0; k < data.size(); k += stride) probe.push_back(data[k]);
+        state.probe = backend_.prepare(std::move(probe), settings_.tree);
+      } else {
+        state.probe = state.cloud;
+      }
       state.odometry = scan.world_from_points();
       state.pose = state.odometry;
       state.points_from_file = rigid_inverse(scan.world_from_points()) * scan.pose_cm;
@@ -124,7 +134,7 @@ class SurveyMatcher {
 
   /// Judges scan i's match (from `start` to its current pose) against `models`.
   void judge(std::size_t i, const Pose& start, std::span<const WorldModel> models) {
-    result_.scans[i].health = judge_registration(backend_, *states_[i].cloud, states_[i].pose, start, models, icp_,
+    result_.scans[i].health = judge_registration(backend_, *states_[i].probe, states_[i].pose, start, models, icp_,
                                                  settings_.health);
   }
 
