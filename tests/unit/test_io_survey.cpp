@@ -180,6 +180,81 @@ TEST(Survey, KittiFolderLayouts) {
   expect_input_error([&] { io::read_survey(nested.path()); }, {"graph.txt", "has 1 poses"});
 }
 
+TEST(Survey, ScansAreInNaturalOrderSoPoseLinesPairWithTheRightScans) {
+  // Byte order would give full0, full1, full10, full100, full2: the wrong pairing.
+  TempDir dir;
+  const auto scans = sample_scans(5);
+  const char* names[] = {"full10", "full2", "full100", "full0", "full1"};
+  for (std::size_t k = 0; k < 5; ++k) {
+    Scan scan = scans[k];
+    scan.pose_cm = Pose::Identity();
+    io::write_pcd(dir / (std::string(names[k]) + ".pcd"), scan, io::PcdEncoding::kBinary);
+  }
+  const io::Survey survey = io::read_survey(dir.path());
+  std::vector<std::string> order;
+  for (const Scan& scan : survey.scans) order.push_back(scan.name);
+  EXPECT_EQ(order, (std::vector<std::string>{"full0", "full1", "full2", "full10", "full100"}));
+  // KITTI numbers of different widths too.
+  TempDir kitti;
+  io::write_kitti_bin(kitti / "9.bin", scans[0]);
+  io::write_kitti_bin(kitti / "10.bin", scans[1]);
+  const io::Survey numbered = io::read_survey(kitti.path());
+  ASSERT_EQ(numbered.scans.size(), 2u);
+  EXPECT_EQ(numbered.scans[0].name, "9");
+}
+
+TEST(Survey, PoseFilesMayUseCommasAndReferencePosesWorkForAnySurvey) {
+  TempDir dir;
+  const auto scans = sample_scans(2);
+  for (std::size_t k = 0; k < 2; ++k) {
+    Scan scan = scans[k];
+    scan.pose_cm = Pose::Identity();
+    io::write_pcd(dir / ("s" + std::to_string(k) + ".pcd"), scan, io::PcdEncoding::kBinary);
+  }
+  // Two 4x4 matrices as CSV (4 lines each, comma and space separated), in metres.
+  std::string csv;
+  for (const Scan& scan : scans) {
+    for (int row = 0; row < 4; ++row) {
+      for (int col = 0; col < 4; ++col) {
+        const double value = col == 3 && row < 3 ? scan.pose_cm(row, col) / 100.0 : scan.pose_cm(row, col);
+        char text[40];
+        std::snprintf(text, sizeof text, "%.17g%s", value, col < 3 ? ", " : "\n");
+        csv += text;
+      }
+    }
+  }
+  TempDir poses;
+  write_text(poses / "poses.csv", csv);
+  io::SurveyReadSettings settings;
+  settings.initial_poses = poses / "poses.csv";
+  settings.reference_poses = poses / "poses.csv";
+  const io::Survey survey = io::read_survey(dir.path(), settings);
+  ASSERT_TRUE(survey.truth_cm.has_value());
+  for (std::size_t k = 0; k < 2; ++k) {
+    EXPECT_LT((survey.scans[k].pose_cm - scans[k].pose_cm).cwiseAbs().maxCoeff(), 1e-6);
+    EXPECT_LT(((*survey.truth_cm)[k] - scans[k].pose_cm).cwiseAbs().maxCoeff(), 1e-6);
+  }
+  std::size_t fourth_line_end = 0;
+  for (int line = 0; line < 4; ++line) fourth_line_end = csv.find('\n', fourth_line_end) + 1;
+  write_text(poses / "short.csv", csv.substr(0, fourth_line_end));  // one matrix for two scans
+  settings.reference_poses = poses / "short.csv";
+  expect_input_error([&] { io::read_survey(dir.path(), settings); }, {"short.csv", "has 1 poses, the survey has 2 scans"});
+}
+
+TEST(Survey, AThreeFloatBinUnderKittisNameIsRefusedForWhatItIs) {
+  TempDir not_sixteen;  // 301 points x 12 bytes = 3612 bytes: divides by 12, not by 16
+  io::write_kitti_bin(not_sixteen / "000000.bin", test::random_scan(301, -2000.0f, 2000.0f, 5), 3);
+  expect_input_error([&] { io::read_survey(not_sixteen.path()); },
+                     {"000000.bin", "multiple of 12 bytes, not of 16", "3 float32 per point"});
+  TempDir sixteen;  // 400 points x 12 bytes = 4800 bytes: divides by 16 too; a "reflectance" is negative
+  Scan four_hundred = test::random_scan(400, -2000.0f, 2000.0f, 7);
+  io::write_kitti_bin(sixteen / "000000.bin", four_hundred, 3);
+  expect_input_error([&] { io::read_survey(sixteen.path()); }, {"000000.bin", "is no reflectance", "3 float32 per point"});
+  TempDir kitti;  // KITTI's own 4 floats, reflectance 0: read
+  io::write_kitti_bin(kitti / "000000.bin", four_hundred, 4);
+  EXPECT_EQ(io::read_survey(kitti.path()).scans[0].size(), 400u);
+}
+
 TEST(Survey, WriterRefusesFoldersWithLeftoverScans) {
   TempDir dir;
   io::write_uos_survey(dir.path(), sample_scans(3));

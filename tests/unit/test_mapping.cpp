@@ -65,6 +65,25 @@ TEST(MappingSimulatedMine, IncrementalMatchingBeatsOdometry) {
   EXPECT_LE(incremental.mean_translation_cm, 0.002 * incremental.path_length_cm);
 }
 
+TEST(MappingInterruption, AStopBetweenScansKeepsTheScansMatchedSoFar) {
+  const auto survey = small_survey(6, 3);
+  CpuBackend cpu;
+  const auto full = map_survey(survey.scans, MappingSettings{}, cpu);
+  EXPECT_FALSE(full.interrupted);
+  EXPECT_EQ(full.scans_matched, 6u);
+  std::size_t asked = 0;
+  const auto stopped = map_survey(survey.scans, MappingSettings{}, cpu, {}, [&] { return ++asked > 3; });
+  ASSERT_TRUE(stopped.interrupted);
+  EXPECT_EQ(stopped.scans_matched, 4u);  // scans 1, 2, 3 were matched after scan 0
+  // Incremental matching never moves a scan again: the kept ones are the full run's, bit for bit.
+  for (std::size_t i = 0; i < 4; ++i) EXPECT_EQ(stopped.scans[i].pose_cm, full.scans[i].pose_cm) << i;
+  // The paper's relaxation stops between its matches too.
+  asked = 0;
+  const auto relaxed = map_survey(survey.scans, MappingSettings::simultaneous(), cpu, {}, [&] { return ++asked > 5; });
+  EXPECT_TRUE(relaxed.interrupted);
+  EXPECT_LT(relaxed.scans_matched, 6u);
+}
+
 TEST(MappingDeterminism, BitIdenticalPosesRunToRunAndForOneOrTwoThreads) {
   const auto survey = small_survey(5, 3);
   MappingSettings settings;

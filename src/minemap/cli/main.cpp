@@ -74,6 +74,7 @@ struct MapOptions {
   std::string unit;  // empty: the format's default
   std::uint32_t points_per_slice = 0;
   fs::path initial_poses;
+  fs::path reference_poses;
   bool right_handed_to_3dtk = false;
   bool quiet = false;
   bool write_unregistered = false;
@@ -114,15 +115,23 @@ int run_simulate(const SimulateOptions& options) {
   return 0;
 }
 
-/// A one-line progress bar on stderr, only when stderr is a terminal.
+/// Progress on stderr: a one-line bar on a terminal; otherwise (a log file, a batch job) a plain
+/// line per matched scan, and one when the reduction is done.
 class ProgressBar {
  public:
-  explicit ProgressBar(bool enabled) : enabled_(enabled && ::isatty(STDERR_FILENO)) {}
+  explicit ProgressBar(bool enabled) : enabled_(enabled), terminal_(::isatty(STDERR_FILENO) != 0) {}
   ~ProgressBar() {
     if (enabled_ && drawn_) std::fputs("\n", stderr);
   }
   void operator()(std::size_t done, std::size_t total, const std::string& phase) {
     if (!enabled_ || total == 0) return;
+    if (!terminal_) {
+      // Scan 0 is the master: matching reports scans 2..n, the reduction only its end.
+      if (phase == "filtering" && done != total) return;
+      std::fprintf(stderr, "minemap: progress: %s %zu/%zu\n", phase.c_str(), done, total);
+      std::fflush(stderr);
+      return;
+    }
     constexpr int kWidth = 40;
     const int filled = static_cast<int>(kWidth * done / total);
     std::fprintf(stderr, "\r%-13s [%s%s] %zu/%zu", phase.c_str(), std::string(filled, '#').c_str(),
@@ -133,6 +142,7 @@ class ProgressBar {
 
  private:
   bool enabled_;
+  bool terminal_;
   bool drawn_ = false;
 };
 
@@ -155,6 +165,7 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
   read.read.points_per_slice = options.points_per_slice;
   read.read.right_handed_to_3dtk = options.right_handed_to_3dtk;
   if (!options.initial_poses.empty()) read.initial_poses = options.initial_poses;
+  if (!options.reference_poses.empty()) read.reference_poses = options.reference_poses;
 
   // Read everything before touching the output folder: bad input leaves it as it was.
   auto start = std::chrono::steady_clock::now();
@@ -164,6 +175,17 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
     std::printf("read %zu %s scans from %s in %.2f s (unit %s)\n", survey.scans.size(), survey.format.c_str(),
                 options.survey.c_str(), load_s, to_string(survey.unit));
     for (const auto& warning : survey.warnings) std::fprintf(stderr, "minemap: warning: %s\n", warning.c_str());
+    // The order scans are matched in (and --initial-poses lines are paired with): natural order.
+    std::string order;
+    const std::size_t n = survey.scans.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      if (n > 6 && i == 3) {
+        order += ", ...";
+        i = n - 3;
+      }
+      order += (i == 0 ? "" : ", ") + survey.scans[i].name;
+    }
+    std::printf("scan order: %s\n", order.c_str());
     if (survey.scans.size() == 1) {
       std::printf("note: a survey of one scan: nothing to register; the map is %s at its initial pose\n",
                   survey.scans.front().name.c_str());
@@ -177,11 +199,18 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
   if (!options.quiet) std::printf("backend: %s\n", choice.message.c_str());
 
   ProgressBar bar(!options.quiet);
-  const MappingResult result =
-      map_survey(survey.scans, settings, *choice.backend, [&](std::size_t done, std::size_t total, const std::string& phase) {
-        if (g_interrupted) throw Interrupted{};  // nothing has been written yet: stop here
-        bar(done, total, phase);
-      });
+  // Ctrl-C or SIGTERM stops the run between scans (and between relaxation matches); what was
+  // matched by then is written below, marked partial, and the exit code is 130.
+  MappingResult result = map_survey(
+      survey.scans, settings, *choice.backend,
+      [&](std::size_t done, std::size_t total, const std::string& phase) { bar(done, total, phase); },
+      [] { return g_interrupted != 0; });
+  std::optional<std::vector<Pose>> truth_cm = survey.truth_cm;
+  const std::size_t survey_scans = result.scans.size();
+  if (result.interrupted) {
+    result.scans.resize(result.scans_matched);
+    if (truth_cm) truth_cm->resize(result.scans_matched);
+  }
   if (!options.quiet) {
     for (const auto& note : result.notes) std::printf("note: %s\n", note.c_str());
   }
@@ -219,11 +248,17 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
   output.title = "minemap " + std::string(to_string(settings.mode)) + ": " + options.survey.filename().string();
   output.load_s = load_s;
   output.backend_choice = choice.message;
+  output.survey_scans = survey_scans;
   {
     const SignalsBlocked no_interrupts_while_writing;
-    write_map_outputs(options.out, result, survey.truth_cm, settings, output);
+    write_map_outputs(options.out, result, truth_cm, settings, output);
   }
-  if (g_interrupted) throw Interrupted{};
+  if (result.interrupted) {
+    std::fprintf(stderr, "minemap: interrupted: wrote the %zu of %zu scans matched so far to %s (report.json: partial)\n",
+                 result.scans.size(), survey_scans, options.out.c_str());
+    return exit_code(ExitCode::kInterrupted);
+  }
+  if (g_interrupted) throw Interrupted{};  // arrived while writing: the outputs are complete
 
   if (!options.quiet) {
     std::printf("matched %zu scans: %d ICP iterations pairwise, %d in %d relaxation matches; %.2f s filter, "
@@ -231,7 +266,7 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
                 result.scans.size(), result.step1_icp_iterations, result.step3_icp_iterations,
                 result.relaxation_matches, result.times.filter_s, result.times.tree_build_s, result.times.pairwise_s,
                 result.times.relaxation_s);
-    if (auto comparison = compare_with_truth(result, survey.truth_cm)) {
+    if (auto comparison = compare_with_truth(result, truth_cm)) {
       const double unit_per_cm = 1.0 / centimetres_per(survey.unit);
       std::printf("pose error against the reference poses (relative to the first scan):\n");
       print_errors("odometry", comparison->odometry, unit_per_cm, to_string(survey.unit));
@@ -347,7 +382,10 @@ int main(int argc, char** argv) {
   map_cmd->add_option("--max-relaxation-matches", mapping.max_relaxation_matches_per_scan,
                       "Cap on relaxation matches after each new scan (0 = 4 x scans so far)");
   map_cmd->add_option("--points-per-slice", map.points_per_slice, "uos files without slice markers: points per slice");
-  map_cmd->add_option("--initial-poses", map.initial_poses, "Initial poses (TUM, KITTI, 4x4 or graph file)");
+  map_cmd->add_option("--initial-poses", map.initial_poses,
+                      "Initial poses (TUM, KITTI, 4x4 or graph file; commas allowed), one per scan in the order printed");
+  map_cmd->add_option("--reference-poses", map.reference_poses,
+                      "Reference poses for the error report, any survey (formats as --initial-poses)");
   map_cmd->add_flag("--right-handed-to-3dtk", map.right_handed_to_3dtk, "Convert right-handed input to 3DTK's frame");
   map_cmd->add_flag("--quiet", map.quiet, "Print nothing but errors");
   map_cmd->add_flag("--accept-doubtful", map.accept_doubtful,

@@ -132,13 +132,16 @@ std::vector<Pose> read_trajectory(const fs::path& path, LengthUnit unit = Length
 struct SurveyReadSettings {
   ReadSettings read;
   std::optional<fs::path> initial_poses;  ///< TUM, KITTI, 4x4 or graph file; else per-format default
+  /// Reference poses for the error report, one per scan in survey order (any survey; replaces
+  /// truth/ or graph.txt). Same formats and unit as initial_poses.
+  std::optional<fs::path> reference_poses;
 };
 
 /// A survey loaded from a folder.
 struct Survey {
   std::string format;  ///< "uos", "pcd", "ply", "kitti"
   LengthUnit unit = LengthUnit::kCentimetre;  ///< the unit the files were read in (outputs use it)
-  std::vector<Scan> scans;                    ///< ordered by name; pose_cm = initial guess
+  std::vector<Scan> scans;                    ///< in natural order of names (full2 before full10); pose_cm = initial guess
   std::optional<std::vector<Pose>> truth_cm;  ///< reference T_world_file per scan, where present
   /// Warnings for the user, one line each: NaN points dropped, gaps in the numbering.
   std::vector<std::string> warnings;
@@ -154,7 +157,8 @@ inline constexpr std::size_t kUnitCheckMinPoints = 100;
 
 /// Detects the format and reads every scan. Layouts:
 ///  - uos: scanNNN.3d (+ scanNNN.pose; missing pose = error), optional truth/scanNNN.pose
-///  - pcd / ply: *.pcd / *.ply sorted by name; initial poses from `initial_poses` or identity
+///  - pcd / ply: *.pcd / *.ply in natural order of their names (digit runs compare as numbers: full2
+///    before full10); initial poses from `initial_poses` or identity
 ///  - kitti: NNNNNN.bin, or NNNNNN/points.bin (xyz only) with graph.txt as reference poses
 /// Every file is parsed first (the first bad file in name order is reported), then the survey is
 /// checked as a whole: a scan with fewer than kMinScanPoints points (kEmpty), two scans with the

@@ -39,6 +39,26 @@ Scan read_kitti_bin(const fs::path& path, const ReadSettings& settings, int floa
   const std::string bytes = detail::read_file_bytes(path);
   if (bytes.empty()) detail::fail_at_byte(name, 0, "no points (empty file)", InputProblem::kEmpty);
   const std::uint64_t whole_records = bytes.size() / record_bytes;
+  // A common variant writes x y z only (3 floats) under KITTI's NNNNNN.bin name. Its size may not
+  // divide by 16 (then it looked truncated), or may (then every 4th float, taken for a reflectance,
+  // is a coordinate). Refuse it either way with what it is.
+  const std::string three_floats_hint =
+      ": a file of 3 float32 per point (x y z)? KITTI's NNNNNN.bin holds 4 (x y z reflectance); minemap reads a "
+      "3-float file as NNNNNN/points.bin (a folder per scan)";
+  if (floats_per_point == 4 && bytes.size() % 16 != 0 && bytes.size() % 12 == 0) {
+    detail::fail_in_file(name, "file size " + std::to_string(bytes.size()) + " is a multiple of 12 bytes, not of 16" +
+                                   three_floats_hint);
+  }
+  if (floats_per_point == 4 && bytes.size() % 12 == 0) {
+    for (std::uint64_t i = 0; i < whole_records; ++i) {
+      const float reflectance = detail::load_le<float>(bytes.data() + i * 16 + 12);
+      if (!(reflectance >= 0.0f) || std::isinf(reflectance)) {
+        detail::fail_at_byte(name, i * 16 + 12,
+                             "point " + std::to_string(i) + ": its 4th float, " + std::to_string(reflectance) +
+                                 ", is no reflectance (never negative or infinite)" + three_floats_hint);
+      }
+    }
+  }
   if (bytes.size() % record_bytes != 0) {
     detail::fail_at_byte(name, whole_records * record_bytes,
                          "file size " + std::to_string(bytes.size()) + " is not a multiple of " +

@@ -74,6 +74,34 @@ struct FolderContent {
   std::vector<fs::path> kitti_xyz_dirs;  ///< NNNNNN/points.bin: x y z
 };
 
+/// File names in natural order: runs of digits compare as numbers (full2 before full10), everything
+/// else byte by byte; names equal that way (full01, full1) fall back to byte order.
+bool natural_less(const std::string& a, const std::string& b) {
+  const auto digit = [](char c) { return c >= '0' && c <= '9'; };
+  std::size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    if (digit(a[i]) && digit(b[j])) {
+      std::size_t i_end = i, j_end = j;
+      while (i_end < a.size() && digit(a[i_end])) ++i_end;
+      while (j_end < b.size() && digit(b[j_end])) ++j_end;
+      std::size_t i_start = i, j_start = j;  // leading zeros do not count
+      while (i_start + 1 < i_end && a[i_start] == '0') ++i_start;
+      while (j_start + 1 < j_end && b[j_start] == '0') ++j_start;
+      const std::string_view x(a.data() + i_start, i_end - i_start), y(b.data() + j_start, j_end - j_start);
+      if (x.size() != y.size()) return x.size() < y.size();
+      if (x != y) return x < y;
+      i = i_end;
+      j = j_end;
+      continue;
+    }
+    if (a[i] != b[j]) return static_cast<unsigned char>(a[i]) < static_cast<unsigned char>(b[j]);
+    ++i;
+    ++j;
+  }
+  if ((i < a.size()) != (j < b.size())) return j < b.size();
+  return a < b;
+}
+
 FolderContent list_folder(const fs::path& dir) {
   std::error_code error;
   if (!fs::is_directory(dir, error)) detail::fail_in_file(dir.string(), "is not a folder");
@@ -104,7 +132,9 @@ FolderContent list_folder(const fs::path& dir) {
   }
   if (error) detail::fail_in_file(dir.string(), "cannot list the folder: " + error.message());
   for (auto* list : {&content.pcd, &content.ply, &content.kitti_bin, &content.kitti_xyz_dirs}) {
-    std::sort(list->begin(), list->end());
+    std::sort(list->begin(), list->end(), [](const fs::path& a, const fs::path& b) {
+      return natural_less(a.filename().string(), b.filename().string());
+    });
   }
   return content;
 }
@@ -409,6 +439,9 @@ Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
   if (settings.initial_poses) {
     const std::vector<Pose> poses = read_pose_list(*settings.initial_poses, survey.unit, survey.scans.size(), read);
     for (std::size_t i = 0; i < poses.size(); ++i) survey.scans[i].pose_cm = poses[i];
+  }
+  if (settings.reference_poses) {
+    survey.truth_cm = read_pose_list(*settings.reference_poses, survey.unit, survey.scans.size(), read);
   }
 
   // The survey as a whole, now that every file parsed.

@@ -1,5 +1,6 @@
 // Trajectory files: 4x4 matrices, TUM, KITTI 3x4 and gtsam_points graphs, plus the rigid-pose checks
-// every pose-reading format shares (pose_text.hpp). All of them allow '#' comments and blank lines.
+// every pose-reading format shares (pose_text.hpp). All of them allow '#' comments and blank lines, and
+// values separated by commas as well as whitespace (4x4 matrices written as CSV).
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
@@ -67,7 +68,7 @@ void for_each_data_line(LineReader& reader, OnLine&& on_line) {
   while (reader.next(line)) {
     const std::string_view content = detail::strip_comment(line);
     if (detail::is_blank(content)) continue;
-    on_line(tokens, detail::split_tokens(content, tokens));
+    on_line(tokens, detail::split_tokens(content, tokens, /*commas=*/true));
   }
 }
 
@@ -277,7 +278,7 @@ TrajectoryFormat detect_trajectory_format(const fs::path& path) {
   while (reader.next(line)) {
     const std::string_view content = detail::strip_comment(line);
     if (detail::is_blank(content)) continue;
-    const std::size_t count = detail::split_tokens(content, tokens);
+    const std::size_t count = detail::split_tokens(content, tokens, /*commas=*/true);
     std::uint64_t index = 0;
     if (parse_vertex_name(tokens[0], index)) return TrajectoryFormat::kGraph;
     if (count == 8) return TrajectoryFormat::kTum;

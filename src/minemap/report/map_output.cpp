@@ -84,6 +84,8 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
   nlohmann::json report;
   report["unit"] = to_string(output.unit);
   report["mode"] = to_string(settings.mode);
+  report["partial"] = output.survey_scans > result.scans.size();
+  report["scans_in_survey"] = std::max(output.survey_scans, result.scans.size());
   report["search"] = to_string(settings.icp.method);
   report["backend"] = result.backend;
   report["backend_choice"] = output.backend_choice;

@@ -18,6 +18,9 @@ struct MapOutputSettings {
   std::string title;                          ///< drawn on the pictures
   double load_s = 0.0;                        ///< reading time, for the report
   std::string backend_choice;                 ///< how the backend was chosen (make_backend's message)
+  /// The survey's scan count; more than the result holds: an interrupted run's partial map (report.json
+  /// says "partial"). 0: the result's own count.
+  std::size_t survey_scans = 0;
 };
 
 /// Pose errors before (odometry) and after registration, when the survey has reference poses.

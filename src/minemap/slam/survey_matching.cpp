@@ -32,8 +32,13 @@ struct ScanState {
 class SurveyMatcher {
  public:
   SurveyMatcher(const std::vector<Scan>& scans, const MappingSettings& settings, ComputeBackend& backend,
-                const ProgressCallback& progress)
-      : scans_(scans), settings_(settings), backend_(backend), progress_(progress), icp_(settings.icp) {
+                const ProgressCallback& progress, const StopRequested& stop_requested)
+      : scans_(scans),
+        settings_(settings),
+        backend_(backend),
+        progress_(progress),
+        stop_requested_(stop_requested),
+        icp_(settings.icp) {
     // A pair of scans that passes the overlap test must also be registrable.
     icp_.termination.min_pairs = std::min(icp_.termination.min_pairs, settings.min_overlap_pairs);
   }
@@ -42,6 +47,7 @@ class SurveyMatcher {
     result_.backend = backend_.name() + ": " + backend_.device_description();
     prepare_all();
     match_all();
+    result_.scans_matched = result_.interrupted ? result_.scans_matched : scans_.size();
     return std::move(result_);
   }
 
@@ -49,6 +55,7 @@ class SurveyMatcher {
   void report(std::size_t done, const std::string& phase) {
     if (progress_) progress_(done, scans_.size(), phase);
   }
+  bool stop_requested() const { return stop_requested_ && stop_requested_(); }
 
   void prepare_all() {
     states_.resize(scans_.size());
@@ -258,7 +265,7 @@ class SurveyMatcher {
     const int cap = settings_.max_relaxation_matches_per_scan > 0 ? settings_.max_relaxation_matches_per_scan
                                                                    : 4 * static_cast<int>(newest + 1);
     int matches = 0;
-    while (!queue.empty() && matches < cap) {
+    while (!queue.empty() && matches < cap && !stop_requested()) {
       const std::size_t current = queue.front();
       queue.pop_front();
       queued[current] = false;
@@ -296,6 +303,12 @@ class SurveyMatcher {
 
   void match_all() {
     for (std::size_t i = 1; i < scans_.size(); ++i) {
+      if (stop_requested()) {
+        // Scans 0..i-1 are final (a relaxation cut short leaves them where its last match put them).
+        result_.interrupted = true;
+        result_.scans_matched = i;
+        return;
+      }
       auto start = Clock::now();
       switch (settings_.mode) {
         case MatchingMode::kPairwise: match_pairwise(i); break;
@@ -310,12 +323,17 @@ class SurveyMatcher {
       }
       report(i + 1, to_string(settings_.mode));
     }
+    if (settings_.mode == MatchingMode::kSimultaneous && stop_requested()) {  // the last relaxation cut short
+      result_.interrupted = true;
+      result_.scans_matched = scans_.size();
+    }
   }
 
   const std::vector<Scan>& scans_;
   const MappingSettings& settings_;
   ComputeBackend& backend_;
   const ProgressCallback& progress_;
+  const StopRequested& stop_requested_;
   IcpSettings icp_;  ///< settings.icp with min_pairs capped by the overlap threshold
   std::vector<ScanState> states_;
   MappingResult result_;
@@ -387,17 +405,17 @@ void MappingSettings::validate() const {
 }
 
 MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings, ComputeBackend& backend,
-                         const ProgressCallback& progress) {
+                         const ProgressCallback& progress, const StopRequested& stop_requested) {
   settings.validate();
   if (scans.empty()) throw std::invalid_argument("the survey holds no scans");
   try {
-    return SurveyMatcher(scans, settings, backend, progress).run();
+    return SurveyMatcher(scans, settings, backend, progress, stop_requested).run();
   } catch (const BackendError& e) {
     if (backend.name() == "cpu") throw;
     // The device failed mid-run: match everything again on the CPU, which gives the CPU's poses.
     const std::string failed = backend.name() == "opencl" ? "OpenCL" : backend.name();
     CpuBackend cpu;
-    MappingResult result = SurveyMatcher(scans, settings, cpu, progress).run();
+    MappingResult result = SurveyMatcher(scans, settings, cpu, progress, stop_requested).run();
     result.backend_note = "CPU backend (TBB), after the " + failed + " failure in the note";
     result.notes.insert(result.notes.begin(),
                         failed + " failed (" + e.what() + "); the survey was matched again on the CPU");

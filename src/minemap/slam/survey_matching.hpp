@@ -148,6 +148,10 @@ struct MappingResult {
   int step1_icp_iterations = 0;  ///< Table I: ICP iterations of the pairwise step
   int step3_icp_iterations = 0;  ///< Table I: ICP iterations of the relaxation
   int relaxation_matches = 0;
+  /// Stopped on request (map_survey's stop_requested) after `scans_matched` scans (0..k-1 hold their
+  /// final poses; the rest are untouched); a complete run has scans_matched == scans.size().
+  bool interrupted = false;
+  std::size_t scans_matched = 0;
   bool all_registered() const;
   /// Indices of the registered scans whose last match was judged doubtful (ScanOutcome::health).
   std::vector<std::size_t> doubtful() const;
@@ -155,6 +159,9 @@ struct MappingResult {
 
 /// Reports progress: scans done of total, and a short phase name.
 using ProgressCallback = std::function<void(std::size_t done, std::size_t total, const std::string& phase)>;
+/// Asked between scans (and between relaxation matches): true stops the run, which returns what it
+/// finished (MappingResult::interrupted). Called from the thread that called map_survey.
+using StopRequested = std::function<bool()>;
 
 /// Registers `scans` (pose_cm = odometry / initial guess; scan 0 is the master and stays fixed) on
 /// `backend`. Throws std::invalid_argument on an empty survey or invalid settings. Registration
@@ -162,7 +169,7 @@ using ProgressCallback = std::function<void(std::size_t done, std::size_t total,
 /// `failure` says why. A BackendError (a device fault) makes it match the whole survey again on a
 /// fresh CPU backend, saying so in `notes`: the poses are then the CPU run's.
 MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings, ComputeBackend& backend,
-                         const ProgressCallback& progress = {});
+                         const ProgressCallback& progress = {}, const StopRequested& stop_requested = {});
 
 /// Pose errors of `estimated` against `reference`, both expressed relative to scan 0 (the master
 /// fixes the frame): translation in cm, rotation in degrees.
