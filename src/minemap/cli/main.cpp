@@ -79,6 +79,7 @@ struct MapOptions {
   bool quiet = false;
   bool write_unregistered = false;
   bool accept_doubtful = false;
+  bool no_retry = false;
 };
 
 /// The value of `--preset` anywhere on the command line ("default" when absent or malformed: the
@@ -158,6 +159,7 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
   if (options.no_filter) settings.filter_enabled = false;
   if (options.sparse_models) settings.dense_models = false;
   if (options.plain_icp) settings.icp.accelerate = false;
+  if (options.no_retry) settings.retry_bound_factors.clear();
   settings.validate();
 
   io::SurveyReadSettings read;
@@ -388,6 +390,8 @@ int main(int argc, char** argv) {
                       "Reference poses for the error report, any survey (formats as --initial-poses)");
   map_cmd->add_flag("--right-handed-to-3dtk", map.right_handed_to_3dtk, "Convert right-handed input to 3DTK's frame");
   map_cmd->add_flag("--quiet", map.quiet, "Print nothing but errors");
+  map_cmd->add_flag("--no-retry", map.no_retry,
+                    "Do not try a doubtful match again from 4x and 16x the pair bound (coarse to fine)");
   map_cmd->add_flag("--accept-doubtful", map.accept_doubtful,
                     "Exit 0 even when a match was judged doubtful (still named on stderr and in report.json)");
   map_cmd->add_flag("--write-unregistered", map.write_unregistered,

@@ -18,7 +18,7 @@ void HealthSettings::validate() const {
 
 RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
                                       const Pose& start, std::span<const WorldModel> models, const IcpSettings& icp,
-                                      const HealthSettings& settings) {
+                                      const HealthSettings& settings, float reach_bound_cm) {
   RegistrationHealth health;
   if (!settings.enabled || models.empty()) return health;
   health.judged = true;
@@ -65,11 +65,12 @@ RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedClo
   }
   health.moved_cm = paired ? std::sqrt(moved2 / double(paired)) : 0.0;
   char text[240];
-  if (health.moved_cm > settings.max_reach * bound) {
+  const float reach = reach_bound_cm > 0.0f ? reach_bound_cm : bound;
+  if (health.moved_cm > settings.max_reach * reach) {
     std::snprintf(text, sizeof text,
                   "the match moved its points %.0f cm (RMS), %.1f times the %g cm pair bound (more than %.1f): it "
                   "started out of reach; check it, give a closer start, or widen --max-pair-dist-cm",
-                  health.moved_cm, health.moved_cm / bound, double(bound), settings.max_reach);
+                  health.moved_cm, health.moved_cm / reach, double(reach), settings.max_reach);
     health.doubt = text;
   } else if (health.paired_fraction < settings.min_paired_fraction) {
     std::snprintf(text, sizeof text, "only %.0f%% of its points paired within %g cm (fewer than %.0f%%): little overlap",

@@ -56,14 +56,16 @@ struct RegistrationHealth {
   double correction_deg = 0.0;     ///< ...and how far it turned it
   double moved_cm = 0.0;           ///< RMS distance the paired data points moved, start to end
   float pair_bound_cm = 0.0f;      ///< the bound it was judged at (the match's own)
+  float retry_bound_cm = 0.0f;     ///< > 0: trusted after a retry that started at this wider bound
   std::string doubt;               ///< empty: trusted; otherwise which test failed, with its figures
   bool doubtful() const { return judged && !doubt.empty(); }
 };
 
 /// Judges `data` at `world_from_data` (moved there from `start`) against `models`, at the pair
-/// bound `icp.max_pair_dist_cm` (exact search).
+/// bound `icp.max_pair_dist_cm` (exact search); the reach test uses `reach_bound_cm` when > 0 (a
+/// match that began at a wider bound, coarse to fine).
 RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
                                       const Pose& start, std::span<const WorldModel> models, const IcpSettings& icp,
-                                      const HealthSettings& settings);
+                                      const HealthSettings& settings, float reach_bound_cm = 0.0f);
 
 }  // namespace minemap

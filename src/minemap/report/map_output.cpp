@@ -134,7 +134,8 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
                                 {"correction", h.correction_cm * unit_per_cm},
                                 {"correction_deg", h.correction_deg},
                                 {"moved", h.moved_cm * unit_per_cm},
-                                {"pair_bound", h.pair_bound_cm * unit_per_cm}};
+                                {"pair_bound", h.pair_bound_cm * unit_per_cm},
+                                {"retry_bound", h.retry_bound_cm * unit_per_cm}};
     }
   }
   report["scans"] = scans;

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <deque>
+#include <functional>
 #include <stdexcept>
 
 #include <tbb/parallel_for.h>
@@ -195,42 +196,76 @@ class SurveyMatcher {
     return models;
   }
 
-  /// Step 1 (and the pairwise mode): match scan i against scan i-1 from corrected odometry.
-  IcpResult match_pairwise(std::size_t i) {
-    const Pose odometry_step = rigid_inverse(states_[i - 1].odometry) * states_[i].odometry;
-    const Pose start = states_[i - 1].pose * odometry_step;
-    states_[i].pose = start;
-    const std::vector<WorldModel> models = models_of({i - 1});
+  /// The models scan i is matched against, for a given pair bound (a metascan is cropped by it).
+  using ModelsForBound = std::function<std::vector<WorldModel>(float bound_cm)>;
+
+  /// Registers scan i from `start` and judges the match. A doubtful one is tried again from the same
+  /// start at each wider bound of settings.retry_bound_factors, coarse to fine (ICP at the wide
+  /// bound, then the usual phases from where it ended), until one is trusted; a trusted retry
+  /// replaces the first match, otherwise the first match and its doubt stay.
+  void register_scan(std::size_t i, const Pose& start, const ModelsForBound& models_for) {
+    const std::vector<WorldModel> models = models_for(icp_.max_pair_dist_cm);
     const IcpResult match = register_icp(backend_, *states_[i].cloud, start, models, icp_);
     result_.step1_icp_iterations += match.iterations();
-    if (match.ok()) {
-      set_pose(i, match.world_from_data, match);
-      judge(i, start, models);
-    } else {
+    if (!match.ok()) {
+      states_[i].pose = start;
       result_.scans[i].pose_cm = start * states_[i].points_from_file;
       result_.scans[i].world_from_points = start;
       mark_failed(i, match);
+      return;
     }
-    return match;
+    set_pose(i, match.world_from_data, match);
+    judge(i, start, models);
+    std::string tried;
+    for (const float factor : settings_.retry_bound_factors) {
+      if (!result_.scans[i].health.doubtful()) return;
+      IcpSettings wide = icp_;
+      wide.max_pair_dist_cm = factor * icp_.max_pair_dist_cm;
+      if (wide.max_pair_dist_cm > settings_.max_retry_bound_cm) break;
+      wide.refine_pair_dist_fraction = 0.0f;
+      const std::vector<WorldModel> wide_models = models_for(wide.max_pair_dist_cm);
+      const IcpResult coarse = register_icp(backend_, *states_[i].cloud, start, wide_models, wide);
+      result_.step1_icp_iterations += coarse.iterations();
+      if (!coarse.ok()) continue;
+      const IcpResult fine = register_icp(backend_, *states_[i].cloud, coarse.world_from_data, wide_models, icp_);
+      result_.step1_icp_iterations += fine.iterations();
+      if (!fine.ok()) continue;
+      RegistrationHealth health = judge_registration(backend_, *states_[i].probe, fine.world_from_data, start,
+                                                     wide_models, icp_, settings_.health, wide.max_pair_dist_cm);
+      char bound[32];
+      std::snprintf(bound, sizeof bound, "%g cm", double(wide.max_pair_dist_cm));
+      if (health.doubtful()) {
+        tried += (tried.empty() ? "" : ", ") + std::string(bound);
+        continue;
+      }
+      set_pose(i, fine.world_from_data, fine);
+      health.retry_bound_cm = wide.max_pair_dist_cm;
+      result_.scans[i].health = health;
+      return;
+    }
+    if (!tried.empty()) result_.scans[i].health.doubt += " (tried again from " + tried + ": still doubtful)";
   }
 
-  void match_incremental(std::size_t i) {
+  /// Step 1 (and the pairwise mode): match scan i against scan i-1 from corrected odometry.
+  void match_pairwise(std::size_t i) {
     const Pose odometry_step = rigid_inverse(states_[i - 1].odometry) * states_[i].odometry;
-    states_[i].pose = states_[i - 1].pose * odometry_step;
-    // The metascan: one kd-tree over the points of the registered scans near the new one, as the
-    // paper (and slam6D) match against. One tree answers each query once, where searching every
-    // neighbour's own tree in turn costs a search per overlapping scan. Built in the frame of the
-    // previous scan, so its float coordinates stay small wherever the survey is.
-    const Pose frame = states_[i - 1].pose;
+    const Pose start = states_[i - 1].pose * odometry_step;
+    states_[i].pose = start;
+    register_scan(i, start, [&](float) { return models_of({i - 1}); });
+  }
+
+  /// The metascan of scan i at its current (predicted) pose: one kd-tree over the points of the
+  /// registered scans near it, as the paper (and slam6D) match against. One tree answers each query
+  /// once, where searching every neighbour's own tree in turn costs a search per overlapping scan.
+  /// Built in the frame of scan i-1 (`frame`), so its float coordinates stay small wherever the
+  /// survey is. Only model points that scan i can reach: inside its box at `at` grown by `grow_cm`. In a
+  /// tunnel the nearby scans hold about ten times the points that lie there (docs/benchmarks.md).
+  std::shared_ptr<const PreparedCloud> build_metascan(std::size_t i, const Pose& frame, const Pose& at, double grow_cm) {
     const Pose frame_inverse = rigid_inverse(frame);
-    // Only model points that the new scan can reach: inside its box at the predicted pose, grown by
-    // the pair bound and the largest correction expected (metascan_margin_cm). In a tunnel the
-    // nearby scans hold about ten times the points that lie there (docs/benchmarks.md).
     std::vector<Eigen::Vector3f> union_points;
     const KdTree& own = states_[i].cloud->tree();
     const std::array<Eigen::Vector3f, 2> corners = {own.bounds_min(), own.bounds_max()};
-    const Bounds3d reach = world_bounds(corners, frame_inverse * states_[i].pose);
-    const double grow_cm = settings_.icp.max_pair_dist_cm + settings_.metascan_margin_cm;
+    const Bounds3d reach = world_bounds(corners, frame_inverse * at);
     const Eigen::Vector3d reach_min = reach.min_cm.array() - grow_cm, reach_max = reach.max_cm.array() + grow_cm;
     for (std::size_t j : nearby(i, i)) {
       const Pose to_frame = frame_inverse * states_[j].pose;
@@ -242,19 +277,20 @@ class SurveyMatcher {
         union_points.push_back(q.cast<float>());
       }
     }
-    const auto metascan = backend_.prepare(std::move(union_points), settings_.tree);
-    const WorldModel model{metascan.get(), frame};
-    const Pose start = states_[i].pose;
-    const IcpResult match = register_icp(backend_, *states_[i].cloud, start, {&model, 1}, icp_);
-    result_.step1_icp_iterations += match.iterations();
-    if (match.ok()) {
-      set_pose(i, match.world_from_data, match);
-      judge(i, start, {&model, 1});
-    } else {
-      result_.scans[i].pose_cm = states_[i].pose * states_[i].points_from_file;
-      result_.scans[i].world_from_points = states_[i].pose;
-      mark_failed(i, match);
-    }
+    return backend_.prepare(std::move(union_points), settings_.tree);
+  }
+
+  void match_incremental(std::size_t i) {
+    const Pose odometry_step = rigid_inverse(states_[i - 1].odometry) * states_[i].odometry;
+    const Pose start = states_[i - 1].pose * odometry_step;
+    states_[i].pose = start;
+    const Pose frame = states_[i - 1].pose;
+    // The metascans made for each bound live until the scan is registered.
+    std::vector<std::shared_ptr<const PreparedCloud>> metascans;
+    register_scan(i, start, [&](float bound_cm) {
+      metascans.push_back(build_metascan(i, frame, start, double(bound_cm) + settings_.metascan_margin_cm));
+      return std::vector<WorldModel>{{metascans.back().get(), frame}};
+    });
   }
 
   /// Steps 2 and 3 after scan `newest` arrived: the queue-based relaxation over scans 0..newest.
@@ -392,6 +428,10 @@ void MappingSettings::validate() const {
   if (model_slice_stride < 1) throw std::invalid_argument("model slice stride must be >= 1");
   if (min_overlap_pairs < 0) throw std::invalid_argument("the overlap threshold must be >= 0 pairs");
   if (max_relaxation_matches_per_scan < 0) throw std::invalid_argument("the relaxation cap must be >= 0");
+  for (const float factor : retry_bound_factors) {
+    if (!(factor > 1.0f) || !std::isfinite(factor)) throw std::invalid_argument("retry bound factors must be > 1");
+  }
+  if (!(max_retry_bound_cm > 0.0f)) throw std::invalid_argument("the widest retry bound must be > 0 cm");
   health.validate();
   if (reduction == Reduction::kVoxel && (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm))) {
     throw std::invalid_argument("the voxel size must be a finite length > 0 cm");

@@ -84,6 +84,13 @@ struct MappingSettings {
   int max_relaxation_matches_per_scan = 0;  ///< cap on step-3 matches after one new scan; 0 = 4 x scans so far
   /// Every match is judged (registration/health.hpp); a doubtful one is named in ScanOutcome::health.
   HealthSettings health;
+  /// Pairwise and incremental matching: a doubtful match is tried again from the same start at these
+  /// multiples of the pair bound, coarse to fine, until one is trusted (1 m, then 4 m for 25 cm):
+  /// a start out of the 25 cm bound's reach (LiDAR without odometry) then still ends right, and
+  /// a survey whose matches are all trusted pays nothing. Empty: no retries.
+  std::vector<float> retry_bound_factors = {4.0f, 16.0f};
+  /// No retry starts wider than this: at tens of metres every surface pairs with some other one.
+  float max_retry_bound_cm = 400.0f;
 
   /// minemap's mapping ICP: IcpSettings::mapping() refined at 7.5 cm (0.3 x 25 cm), a phase
   /// converged when a step moves less than 1 mm and turns less than 0.01° (1.7 mm at 10 m), well
