@@ -267,16 +267,23 @@ class SurveyMatcher {
     const std::array<Eigen::Vector3f, 2> corners = {own.bounds_min(), own.bounds_max()};
     const Bounds3d reach = world_bounds(corners, frame_inverse * at);
     const Eigen::Vector3d reach_min = reach.min_cm.array() - grow_cm, reach_max = reach.max_cm.array() + grow_cm;
-    for (std::size_t j : nearby(i, i)) {
-      const Pose to_frame = frame_inverse * states_[j].pose;
+    // One task per nearby scan, concatenated in the list's order: the same union for any thread count.
+    const std::vector<std::size_t> near = nearby(i, i);
+    std::vector<std::vector<Eigen::Vector3f>> parts(near.size());
+    tbb::parallel_for(std::size_t{0}, near.size(), [&](std::size_t k) {
+      const Pose to_frame = frame_inverse * states_[near[k]].pose;
       const Eigen::Matrix3d rotation = to_frame.block<3, 3>(0, 0);
       const Eigen::Vector3d translation = to_frame.block<3, 1>(0, 3);
-      for (const Eigen::Vector3f& p : states_[j].model_cloud->points()) {
+      for (const Eigen::Vector3f& p : states_[near[k]].model_cloud->points()) {
         const Eigen::Vector3d q = rotation * p.cast<double>() + translation;
         if ((q.array() < reach_min.array()).any() || (q.array() > reach_max.array()).any()) continue;
-        union_points.push_back(q.cast<float>());
+        parts[k].push_back(q.cast<float>());
       }
-    }
+    });
+    std::size_t total = 0;
+    for (const auto& part : parts) total += part.size();
+    union_points.reserve(total);
+    for (const auto& part : parts) union_points.insert(union_points.end(), part.begin(), part.end());
     return backend_.prepare(std::move(union_points), settings_.tree);
   }
 
