@@ -137,10 +137,11 @@ TEST_F(Faults, OutOfResourcesLaunchMidRunMatchesTheSurveyAgainOnTheCpu) {
 }
 
 TEST_F(Faults, DeviceMemoryExhaustedUploadingACloudMatchesTheSurveyAgainOnTheCpu) {
-  // Allocation 1 is the backend's partial-sum buffer, 2-13 the two slice-filter passes of scan000,
-  // 14-17 its data cloud, 18-21 its model cloud: the upload of the model cloud fails.
+  // Allocation 1 is the backend's partial-sum buffer, 2-37 the two slice-filter passes of each of
+  // the three scans (all scans are reduced before any tree is built), 38-41 scan000's data cloud:
+  // its upload fails.
   std::string output;
-  ASSERT_EQ(map("MINEMAP_OPENCL_INJECT_FAULT=alloc:20", "opencl", "alloc", &output), 0) << output;
+  ASSERT_EQ(map("MINEMAP_OPENCL_INJECT_FAULT=alloc:39", "opencl", "alloc", &output), 0) << output;
   const std::string line = the_one_line_naming(output, "CL_MEM_OBJECT_ALLOCATION_FAILURE");
   EXPECT_EQ(line.rfind("note: OpenCL failed (uploading a cloud to the OpenCL device: clCreateBuffer", 0), 0u) << line;
   EXPECT_EQ(lines_containing(output, "note:").size(), 1u) << output;

@@ -48,6 +48,17 @@ class ComputeBackend {
   virtual std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points_cm,
                                                        const KdTreeSettings& tree_settings) = 0;
 
+  /// prepare() for each cloud, in order: one tree per cloud, the same trees as one call each. The
+  /// CPU backend builds them in parallel (a survey's scans: each tree alone is too small to split
+  /// well); this default builds them in turn.
+  virtual std::vector<std::shared_ptr<const PreparedCloud>> prepare_many(
+      std::vector<std::vector<Eigen::Vector3f>> clouds_cm, const KdTreeSettings& tree_settings) {
+    std::vector<std::shared_ptr<const PreparedCloud>> prepared;
+    prepared.reserve(clouds_cm.size());
+    for (auto& cloud : clouds_cm) prepared.push_back(prepare(std::move(cloud), tree_settings));
+    return prepared;
+  }
+
   /// Pairs every data point with its closest point over all `models` within the pair bound and
   /// returns the point-to-point sums, centred on the data cloud's centroid. Clouds must come from
   /// this backend's prepare().

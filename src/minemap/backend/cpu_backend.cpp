@@ -86,6 +86,16 @@ std::shared_ptr<const PreparedCloud> CpuBackend::prepare(std::vector<Eigen::Vect
   return std::make_shared<CpuPreparedCloud>(std::move(points_cm), tree_settings);
 }
 
+std::vector<std::shared_ptr<const PreparedCloud>> CpuBackend::prepare_many(
+    std::vector<std::vector<Eigen::Vector3f>> clouds_cm, const KdTreeSettings& tree_settings) {
+  std::vector<std::shared_ptr<const PreparedCloud>> prepared(clouds_cm.size());
+  // Building a tree touches nothing shared: one task per cloud, each tree the same as alone.
+  tbb::parallel_for(std::size_t{0}, clouds_cm.size(), [&](std::size_t k) {
+    prepared[k] = std::make_shared<CpuPreparedCloud>(std::move(clouds_cm[k]), tree_settings);
+  });
+  return prepared;
+}
+
 PairSums CpuBackend::pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
                                   const PairingSettings& settings) {
   const auto placed = place_models(models);

@@ -15,6 +15,8 @@ class CpuBackend final : public ComputeBackend {
   std::string device_description() const override { return "CPU (TBB bucket kd-tree)"; }
   std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points_cm,
                                                const KdTreeSettings& tree_settings) override;
+  std::vector<std::shared_ptr<const PreparedCloud>> prepare_many(std::vector<std::vector<Eigen::Vector3f>> clouds_cm,
+                                                                 const KdTreeSettings& tree_settings) override;
   PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
                         const PairingSettings& settings) override;
   std::vector<NearestPair> nearest(const PreparedCloud& data, std::span<const ModelPlacement> models,

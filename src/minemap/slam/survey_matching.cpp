@@ -75,6 +75,9 @@ class SurveyMatcher {
       });
       result_.times.filter_s += seconds_since(start);
     }
+    std::vector<std::vector<Eigen::Vector3f>> data_points(scans_.size()), model_points_of(scans_.size()),
+        probe_points(scans_.size());
+    std::vector<bool> has_model(scans_.size(), false), has_probe(scans_.size(), false);
     for (std::size_t i = 0; i < scans_.size(); ++i) {
       const Scan& scan = scans_[i];
       ScanOutcome& outcome = result_.scans[i];
@@ -117,27 +120,42 @@ class SurveyMatcher {
       }
       result_.times.filter_s += seconds_since(start);
       outcome.points_used = points.size();
-      start = Clock::now();
-      ScanState& state = states_[i];
       outcome.used_points_cm = points;
-      state.cloud = backend_.prepare(std::move(points), settings_.tree);
-      state.model_cloud = dense_model ? backend_.prepare(std::move(model_points), settings_.tree) : state.cloud;
       const std::size_t stride = static_cast<std::size_t>(settings_.health.probe_stride);
       if (settings_.health.enabled && stride > 1) {
-        std::vector<Eigen::Vector3f> probe;
-        const auto data = state.cloud->points();
-        for (std::size_t k = 0; k < data.size(); k += stride) probe.push_back(data[k]);
-        state.probe = backend_.prepare(std::move(probe), settings_.tree);
-      } else {
-        state.probe = state.cloud;
+        for (std::size_t k = 0; k < points.size(); k += stride) probe_points[i].push_back(points[k]);
+        has_probe[i] = true;
       }
+      data_points[i] = std::move(points);
+      if (dense_model) {
+        model_points_of[i] = std::move(model_points);
+        has_model[i] = true;
+      }
+      ScanState& state = states_[i];
       state.odometry = scan.world_from_points();
       state.pose = state.odometry;
       state.points_from_file = rigid_inverse(scan.world_from_points()) * scan.pose_cm;
       outcome.world_from_points = state.pose;
-      result_.times.tree_build_s += seconds_since(start);
       report(i + 1, "filtering");
     }
+    // Every tree at once (the CPU backend builds them in parallel); clouds in scan order.
+    const auto start = Clock::now();
+    auto data_clouds = backend_.prepare_many(std::move(data_points), settings_.tree);
+    std::vector<std::vector<Eigen::Vector3f>> models, probes;
+    for (std::size_t i = 0; i < scans_.size(); ++i) {
+      if (has_model[i]) models.push_back(std::move(model_points_of[i]));
+      if (has_probe[i]) probes.push_back(std::move(probe_points[i]));
+    }
+    auto model_clouds = backend_.prepare_many(std::move(models), settings_.tree);
+    auto probe_clouds = backend_.prepare_many(std::move(probes), settings_.tree);
+    std::size_t next_model = 0, next_probe = 0;
+    for (std::size_t i = 0; i < scans_.size(); ++i) {
+      ScanState& state = states_[i];
+      state.cloud = std::move(data_clouds[i]);
+      state.model_cloud = has_model[i] ? std::move(model_clouds[next_model++]) : state.cloud;
+      state.probe = has_probe[i] ? std::move(probe_clouds[next_probe++]) : state.cloud;
+    }
+    result_.times.tree_build_s += seconds_since(start);
   }
 
   /// Judges scan i's match (from `start` to its current pose) against `models`.
