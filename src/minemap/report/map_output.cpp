@@ -1,5 +1,8 @@
 #include "minemap/report/map_output.hpp"
 
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+
 #include <chrono>
 #include <nlohmann/json.hpp>
 
@@ -56,10 +59,15 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
   std::vector<io::TimedPose> trajectory;
   std::vector<Eigen::Vector3f> map_points;
   std::vector<Eigen::Vector3d> positions, reference_positions;
-  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+  // Files that do not depend on each other are written in parallel (each one atomically); the
+  // first failure propagates as it would from a serial loop.
+  tbb::parallel_for(std::size_t{0}, result.scans.size(), [&](std::size_t i) {
     const ScanOutcome& scan = result.scans[i];
     io::write_uos_frames(out_dir / (scan.name + ".frames"), scan.frames, output.unit);
     io::write_uos_pose(out_dir / (scan.name + ".pose"), scan.pose_cm, output.unit);
+  });
+  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+    const ScanOutcome& scan = result.scans[i];
     trajectory.push_back({static_cast<double>(i), scan.pose_cm});
     positions.push_back(scan.pose_cm.block<3, 1>(0, 3));
     const Eigen::Matrix3d r = scan.world_from_points.block<3, 3>(0, 0);
@@ -71,15 +79,17 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
     const Pose align = result.scans.front().pose_cm * rigid_inverse(truth_cm->front());
     for (const auto& pose : *truth_cm) reference_positions.push_back((align * pose).block<3, 1>(0, 3));
   }
-  io::write_tum(out_dir / "trajectory.tum", trajectory, output.unit);
-  io::write_ply(out_dir / "map.ply", map_points, true, output.unit);
-
   report::MapViewSettings view;
   view.up_axis = output.up_axis;
   view.title = output.title;
   const report::MapViewInput input{map_points, positions, reference_positions};
-  report::write_top_view_png(out_dir / "top.png", input, view);
-  report::write_side_view_png(out_dir / "side.png", input, view);
+  tbb::parallel_invoke(
+      [&] {
+        io::write_tum(out_dir / "trajectory.tum", trajectory, output.unit);
+        io::write_ply(out_dir / "map.ply", map_points, true, output.unit);
+      },
+      [&] { report::write_top_view_png(out_dir / "top.png", input, view); },
+      [&] { report::write_side_view_png(out_dir / "side.png", input, view); });
 
   nlohmann::json report;
   report["unit"] = to_string(output.unit);
