@@ -11,6 +11,7 @@
 
 #include "io_test_helpers.hpp"
 #include "minemap/io/formats.hpp"
+#include "minemap/io/text_reader.hpp"
 
 namespace minemap {
 namespace {
@@ -170,6 +171,30 @@ TEST(UosPoints, EmptyMissingAndCommentOnlyFilesAreRefused) {
   const auto missing = dir / "missing.3d";
   expect_input_error([&] { io::read_uos_points(missing); }, {missing.string(), "cannot open"});
   expect_input_error([&] { io::read_uos_points(dir.path()); }, {dir.path().string(), "folder"});
+}
+
+// Scan files are read into a buffer each thread reuses: a smaller file after a larger one, and a
+// file after a failed read, must come back with their own bytes only.
+TEST(UosPoints, ReadsInTurnKeepNothingOfTheScanBefore) {
+  TempDir dir;
+  const Scan large = test::random_scan(5000, -5000.0f, 5000.0f, 3);
+  const Scan small = test::random_scan(40, -50.0f, 50.0f, 4);
+  io::write_uos_points(dir / "scan000.3d", large);
+  io::write_uos_points(dir / "scan001.3d", small);
+  write_text(dir / "scan002.3d", "1 2 3\n4 5 x\n");
+  EXPECT_EQ(io::read_uos_points(dir / "scan000.3d").size(), large.size());
+  const Scan back = io::read_uos_points(dir / "scan001.3d");
+  ASSERT_EQ(back.size(), small.size());
+  for (std::size_t i = 0; i < small.size(); ++i) ASSERT_EQ(back.points_cm[i], small.points_cm[i]) << "point " << i;
+  expect_input_error([&] { io::read_uos_points(dir / "scan002.3d"); }, {at_line(dir / "scan002.3d", 2), "not a number"});
+  expect_input_error([&] { io::read_uos_points(dir / "missing.3d"); }, {"missing.3d", "cannot open"});
+  EXPECT_EQ(io::read_uos_points(dir / "scan001.3d").size(), small.size());
+  // Two alive at once in one thread: the second gets a buffer of its own.
+  const io::detail::ScanFileBytes first(dir / "scan000.3d");
+  const io::detail::ScanFileBytes second(dir / "scan001.3d");
+  EXPECT_NE(&first.bytes(), &second.bytes());
+  EXPECT_EQ(first.bytes(), io::detail::read_file_bytes(dir / "scan000.3d"));
+  EXPECT_EQ(second.bytes(), io::detail::read_file_bytes(dir / "scan001.3d"));
 }
 
 TEST(UosPoints, UnmarkedFilesSplitIntoFixedSlicesOnRequest) {

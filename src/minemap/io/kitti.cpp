@@ -36,7 +36,8 @@ Scan read_kitti_bin(const fs::path& path, const ReadSettings& settings, int floa
                              std::to_string(settings.max_points),
                          InputProblem::kCountBeyondLimits);
   }
-  const std::string bytes = detail::read_file_bytes(path);
+  const detail::ScanFileBytes file(path);
+  const std::string& bytes = file.bytes();
   if (bytes.empty()) detail::fail_at_byte(name, 0, "no points (empty file)", InputProblem::kEmpty);
   const std::uint64_t whole_records = bytes.size() / record_bytes;
   // A common variant writes x y z only (3 floats) under KITTI's NNNNNN.bin name. Its size may not

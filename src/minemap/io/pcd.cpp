@@ -311,7 +311,8 @@ void read_binary_points(const char* data, const PcdHeader& header, detail::ScanB
 }  // namespace
 
 Scan read_pcd(const fs::path& path, const ReadSettings& settings) {
-  const std::string bytes = detail::read_file_bytes(path);
+  const detail::ScanFileBytes file(path);
+  const std::string& bytes = file.bytes();
   const std::string name = path.string();
   LineReader reader(bytes, name);
   detail::ScanBuilder builder(path, settings, LengthUnit::kMetre);

@@ -416,7 +416,8 @@ void read_ascii_data(LineReader& reader, const PlyHeader& header, detail::ScanBu
 }  // namespace
 
 Scan read_ply(const fs::path& path, const ReadSettings& settings) {
-  const std::string bytes = detail::read_file_bytes(path);
+  const detail::ScanFileBytes file(path);
+  const std::string& bytes = file.bytes();
   LineReader reader(bytes, path.string());
   detail::ScanBuilder builder(path, settings, LengthUnit::kMetre);
   const PlyHeader header = read_header(reader, settings);

@@ -74,8 +74,9 @@ Scan ScanBuilder::finish(bool split_unmarked) {
     for (const std::size_t start : starts) scan.slice_offsets.push_back(static_cast<std::uint32_t>(start));
     scan.slice_offsets.push_back(static_cast<std::uint32_t>(count));
   }
-  // push_back left up to twice the capacity needed; a survey holds every scan's points at once.
-  points_cm_.shrink_to_fit();
+  // Growth by push_back leaves up to twice the capacity needed, and a survey holds every scan's
+  // points at once. A reader that sized them well (uos counts its lines) skips the copy.
+  if (points_cm_.capacity() - points_cm_.size() > points_cm_.size() / 16) points_cm_.shrink_to_fit();
   scan.points_cm = std::move(points_cm_);
   scan.local_origin_cm = local_origin_cm_;
   scan.recentre_if_far(kFarFromOrigin_cm);

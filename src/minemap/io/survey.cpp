@@ -301,17 +301,27 @@ void check_scan_sizes(const std::vector<Scan>& scans) {
 /// Two scans with exactly the same points are one file copied twice (a real scanner never repeats
 /// its noise); matching a scan against its copy would only hide the mistake.
 void check_duplicate_scans(const std::vector<Scan>& scans) {
+  // One hash per scan, in parallel (hashing is a pass over every point of the survey): FNV-1a over
+  // the points' 32-bit words and the local origin. Equal scans hash alike; equal hashes are compared.
+  std::vector<std::uint64_t> hashes(scans.size());
+  tbb::parallel_for(std::size_t{0}, scans.size(), [&](std::size_t i) {
+    std::uint64_t hash = 1469598103934665603ull;
+    const auto mix = [&hash](const void* data, std::size_t bytes) {
+      const auto* p = static_cast<const unsigned char*>(data);
+      for (std::size_t b = 0; b + 4 <= bytes; b += 4) {
+        std::uint32_t word;
+        std::memcpy(&word, p + b, 4);
+        hash = (hash ^ word) * 1099511628211ull;
+      }
+    };
+    mix(scans[i].points_cm.data(), scans[i].points_cm.size() * sizeof(Eigen::Vector3f));
+    mix(scans[i].local_origin_cm.data(), 3 * sizeof(double));
+    hashes[i] = hash;
+  });
   std::map<std::uint64_t, std::size_t> by_hash;
   for (std::size_t i = 0; i < scans.size(); ++i) {
     const Scan& scan = scans[i];
-    std::uint64_t hash = 1469598103934665603ull;  // FNV-1a over the point bytes and the local origin
-    const auto mix = [&](const void* data, std::size_t bytes) {
-      const auto* p = static_cast<const unsigned char*>(data);
-      for (std::size_t b = 0; b < bytes; ++b) hash = (hash ^ p[b]) * 1099511628211ull;
-    };
-    mix(scan.points_cm.data(), scan.points_cm.size() * sizeof(Eigen::Vector3f));
-    mix(scan.local_origin_cm.data(), 3 * sizeof(double));
-    const auto [it, inserted] = by_hash.emplace(hash, i);
+    const auto [it, inserted] = by_hash.emplace(hashes[i], i);
     if (inserted) continue;
     const Scan& first = scans[it->second];
     if (first.points_cm == scan.points_cm && first.local_origin_cm == scan.local_origin_cm) {
@@ -326,16 +336,23 @@ void check_duplicate_scans(const std::vector<Scan>& scans) {
 
 /// The units check (formats.hpp, kSuspiciousScanDiagonal_cm): only for the uos default unit.
 void check_units(const std::vector<Scan>& scans) {
-  const Scan* largest = nullptr;
-  double largest_diagonal_cm = 0.0;
-  for (const Scan& scan : scans) {
-    if (scan.size() < kUnitCheckMinPoints) continue;
+  std::vector<double> diagonals_cm(scans.size(), -1.0);  // -1: too few points to judge
+  tbb::parallel_for(std::size_t{0}, scans.size(), [&](std::size_t i) {
+    const Scan& scan = scans[i];
+    if (scan.size() < kUnitCheckMinPoints) return;
     Eigen::Vector3f lo = scan.points_cm.front(), hi = scan.points_cm.front();
     for (const Eigen::Vector3f& p : scan.points_cm) {
       lo = lo.cwiseMin(p);
       hi = hi.cwiseMax(p);
     }
-    const double diagonal_cm = (hi - lo).cast<double>().norm();
+    diagonals_cm[i] = (hi - lo).cast<double>().norm();
+  });
+  const Scan* largest = nullptr;
+  double largest_diagonal_cm = 0.0;
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    const Scan& scan = scans[i];
+    const double diagonal_cm = diagonals_cm[i];
+    if (diagonal_cm < 0.0) continue;
     if (largest == nullptr || diagonal_cm > largest_diagonal_cm) {
       largest = &scan;
       largest_diagonal_cm = diagonal_cm;

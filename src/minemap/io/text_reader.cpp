@@ -13,6 +13,37 @@
 namespace minemap::io::detail {
 
 std::string read_file_bytes(const std::filesystem::path& path) {
+  std::string bytes;
+  read_file_bytes_into(path, bytes);
+  return bytes;
+}
+
+namespace {
+thread_local std::string t_scan_buffer;
+thread_local bool t_scan_buffer_taken = false;
+}  // namespace
+
+ScanFileBytes::ScanFileBytes(const std::filesystem::path& path) : bytes_(&own_) {
+  if (!t_scan_buffer_taken) {
+    t_scan_buffer_taken = holds_thread_buffer_ = true;
+    bytes_ = &t_scan_buffer;
+  }
+  try {
+    read_file_bytes_into(path, *bytes_);
+  } catch (...) {
+    if (holds_thread_buffer_) t_scan_buffer_taken = false;
+    throw;
+  }
+}
+
+ScanFileBytes::~ScanFileBytes() {
+  if (!holds_thread_buffer_) return;
+  if (t_scan_buffer.capacity() > kKeepBytes) std::string().swap(t_scan_buffer);
+  t_scan_buffer_taken = false;
+}
+
+void read_file_bytes_into(const std::filesystem::path& path, std::string& bytes) {
+  bytes.clear();
   const std::string name = path.string();
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) fail_in_file(name, std::string("cannot open: ") + std::strerror(errno));
@@ -23,7 +54,6 @@ std::string read_file_bytes(const std::filesystem::path& path) {
   struct stat info {};
   if (::fstat(fd, &info) != 0) fail_in_file(name, std::string("cannot read: ") + std::strerror(errno));
   if (S_ISDIR(info.st_mode)) fail_in_file(name, "is a folder, not a file");
-  std::string bytes;
   // Regular files: one allocation of the real size. Pipes and the like report 0 and grow as read.
   if (S_ISREG(info.st_mode) && info.st_size > 0) bytes.reserve(static_cast<std::size_t>(info.st_size));
   char buffer[1 << 16];
@@ -36,7 +66,6 @@ std::string read_file_bytes(const std::filesystem::path& path) {
     }
     bytes.append(buffer, static_cast<std::size_t>(got));
   }
-  return bytes;
 }
 
 void fail_in_file(const std::string& path, const std::string& message, InputProblem problem) {

@@ -20,6 +20,29 @@ namespace minemap::io::detail {
 
 /// The file's bytes. InputError naming the file when it is missing, a folder or unreadable.
 std::string read_file_bytes(const std::filesystem::path& path);
+/// The same into `bytes`, replacing its contents and keeping its capacity.
+void read_file_bytes_into(const std::filesystem::path& path, std::string& bytes);
+
+/// A scan file's bytes in a buffer that the calling thread reuses from scan to scan. A survey is
+/// read one scan per task; a fresh buffer per scan costs an allocation and the first touch of every
+/// page, which is what kept reading from scaling across cores (docs/benchmarks.md). Holds the
+/// thread's buffer while alive: a second one alive in the same thread gets a buffer of its own.
+/// Buffers above kKeepBytes are released afterwards, so a huge scan does not pin its size.
+class ScanFileBytes {
+ public:
+  explicit ScanFileBytes(const std::filesystem::path& path);
+  ~ScanFileBytes();
+  ScanFileBytes(const ScanFileBytes&) = delete;
+  ScanFileBytes& operator=(const ScanFileBytes&) = delete;
+  const std::string& bytes() const { return *bytes_; }
+
+  static constexpr std::size_t kKeepBytes = std::size_t{64} << 20;
+
+ private:
+  std::string own_;            ///< used when the thread's buffer is already taken
+  std::string* bytes_;         ///< the thread's buffer or own_
+  bool holds_thread_buffer_ = false;
+};
 
 /// Throw InputError at a place in the file; `problem` picks the kind (and the exit code).
 [[noreturn]] void fail_in_file(const std::string& path, const std::string& message,

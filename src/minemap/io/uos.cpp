@@ -72,11 +72,14 @@ EulerPose exact_euler_for_pose_file(const Pose& m) {
 // a number that does not fit a double ("1e999") or a non-finite value fails at its line instead of
 // becoming a point at infinity.
 Scan read_uos_points(const fs::path& path, const ReadSettings& settings) {
-  const std::string text = detail::read_file_bytes(path);
+  const detail::ScanFileBytes file(path);
+  const std::string& text = file.bytes();
   LineReader reader(text, path.string());
   detail::ScanBuilder builder(path, settings, LengthUnit::kCentimetre);
-  // Point lines are rarely shorter than ~20 bytes; growth covers denser files.
-  builder.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(text.size() / 20, settings.max_points)));
+  // One point per line at most: counting the lines (a fast scan) sizes the points once, so they
+  // need neither growth nor a shrinking copy.
+  const auto lines = static_cast<std::uint64_t>(std::count(text.begin(), text.end(), '\n')) + 1;
+  builder.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(lines, settings.max_points)));
 
   std::size_t columns = 0;  // 3 (x y z) or 4 (x y z reflectance), fixed by the first point line
   std::int64_t first_point_line = 0;

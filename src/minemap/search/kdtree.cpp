@@ -14,8 +14,9 @@ namespace minemap {
 /// depth-first build: the tree is the same for any thread count.
 struct KdTree::Builder {
   /// Subtrees of at least this many points build their halves in parallel (smaller ones are not
-  /// worth a task).
-  static constexpr std::int32_t kParallelPoints = 16384;
+  /// worth a task). The midpoint cut splits unevenly, so a metascan of 30-40 thousand points needs
+  /// tasks this small to keep two cores busy (2 threads against 1: 1.4x at 16384, 1.6x at 4096).
+  static constexpr std::int32_t kParallelPoints = 4096;
 
   std::vector<KdPoint>& points;
   const KdTreeSettings& settings;
