@@ -65,6 +65,45 @@ TEST(MappingSimulatedMine, IncrementalMatchingBeatsOdometry) {
   EXPECT_LE(incremental.mean_translation_cm, 0.002 * incremental.path_length_cm);
 }
 
+// A survey that drives a loop back to its start: the loop is found, matched and closed, and the
+// map is more accurate for it; without loop closing the first and last scans disagree more.
+TEST(MappingLoops, ALoopSurveyIsClosedAndItsEndsAgree) {
+  sim::SimulationSettings sim_settings;
+  sim_settings.mine.seed = 1;
+  sim_settings.mine.loop_length_cm = 12000.0;
+  const auto survey = sim::simulate_mine_survey(sim_settings);
+  ASSERT_GE(survey.scans.size(), 25u);
+  CpuBackend cpu;
+  MappingSettings settings;
+  const auto closed = map_survey(survey.scans, settings, cpu);
+  settings.loops.enabled = false;
+  const auto open = map_survey(survey.scans, settings, cpu);
+  ASSERT_TRUE(closed.all_registered());
+  ASSERT_TRUE(open.all_registered());
+  EXPECT_TRUE(closed.doubtful().empty());
+  int loops_closed = 0;
+  for (const LoopClosure& loop : closed.loops) loops_closed += loop.closed ? 1 : 0;
+  EXPECT_GE(loops_closed, 1);
+  EXPECT_TRUE(open.loops.empty());
+  // How far the last scan is from where the truth puts it relative to the first.
+  const auto end_error = [&](const MappingResult& result) {
+    const std::vector<Pose> poses = poses_of(result);
+    const Pose estimated = rigid_inverse(poses.front()) * poses.back();
+    const Pose truth = rigid_inverse(survey.truth_cm.front()) * survey.truth_cm.back();
+    return translation_norm(rigid_inverse(truth) * estimated);
+  };
+  const auto closed_errors = pose_errors(poses_of(closed), survey.truth_cm);
+  const auto open_errors = pose_errors(poses_of(open), survey.truth_cm);
+  std::printf("loop of %.1f m: end-to-start error %.2f cm closed, %.2f cm open; mean error %.2f cm closed, %.2f cm "
+              "open\n",
+              closed_errors.path_length_cm / 100.0, end_error(closed), end_error(open),
+              closed_errors.mean_translation_cm, open_errors.mean_translation_cm);
+  EXPECT_LT(end_error(closed), 5.0);
+  EXPECT_LT(end_error(closed), end_error(open));
+  EXPECT_LT(closed_errors.mean_translation_cm, open_errors.mean_translation_cm);
+  EXPECT_LE(closed_errors.mean_translation_cm, 0.001 * closed_errors.path_length_cm);
+}
+
 TEST(MappingInterruption, AStopBetweenScansKeepsTheScansMatchedSoFar) {
   const auto survey = small_survey(6, 3);
   CpuBackend cpu;

@@ -258,6 +258,40 @@ TEST(SimDrive, FullDriveCoversTheDriveLengthAndRisesByTheGain) {
   EXPECT_LT(max_tilt_deg, 8.0);
 }
 
+// The loop survey: around the pillars right of the drive and back. Every stop stands in open space
+// (in the entries and cross-cuts, never in a pillar), the loop is about as long as asked, its last
+// stop is its first again, and it goes round (through the parallel entry, x beyond the pillars).
+TEST(SimDrive, LoopSurveyGoesAroundThePillarsAndBackToItsStart) {
+  for (const std::uint32_t seed : {1u, 7u}) {
+    SimulationSettings settings;
+    settings.mine.seed = seed;
+    settings.mine.loop_length_cm = 12000.0;
+    const MineWorld world(settings.mine, settings.mine.drive_length_cm);
+    const std::vector<ScanStop> stops = plan_loop_stops(settings.mine, world);
+    std::vector<Pose> truth;
+    double max_x = 0.0;
+    for (const ScanStop& stop : stops) {
+      truth.push_back(robot_pose_on_floor(world, stop, settings.scanner.mount_height_cm));
+      EXPECT_TRUE(world.in_open_space(truth.back().block<3, 1>(0, 3))) << "seed " << seed << " stop at x " << stop.x_cm
+                                                                       << " z " << stop.z_cm;
+      max_x = std::max(max_x, stop.x_cm);
+    }
+    const double length = path_length_cm(truth);
+    EXPECT_GT(length, 0.7 * settings.mine.loop_length_cm) << "seed " << seed;
+    EXPECT_LT(length, 1.4 * settings.mine.loop_length_cm) << "seed " << seed;
+    EXPECT_GT(max_x, world.entries()[1].x_min_cm) << "seed " << seed;  // reached the parallel entry
+    const Pose closure = rigid_inverse(truth.front()) * truth.back();
+    EXPECT_LT(translation_norm(closure), 30.0) << "seed " << seed;
+    EXPECT_LT(rotation_angle_deg(closure), 5.0) << "seed " << seed;
+    EXPECT_NEAR(stops.size(), std::lround(length / settings.mine.mean_step_cm) + 1, 2.0) << "seed " << seed;
+    // A shorter survey is the start of the loop.
+    settings.mine.scans = 5;
+    const std::vector<ScanStop> start = plan_loop_stops(settings.mine, world);
+    ASSERT_EQ(start.size(), 5u);
+    EXPECT_EQ(start[4].z_cm, stops[4].z_cm);
+  }
+}
+
 TEST(SimDrive, ElevationGainFollowsTheSetting) {
   SimulationSettings settings;
   settings.mine.elevation_gain_cm = 1000.0;

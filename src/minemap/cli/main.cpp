@@ -59,6 +59,7 @@ struct SimulateOptions {
   fs::path out;
   int scans = 0;
   std::uint32_t seed = 1;
+  double loop_m = 0.0;
 };
 
 /// What `map` takes beyond MappingSettings (which the options bind to directly: its defaults are
@@ -80,6 +81,7 @@ struct MapOptions {
   bool write_unregistered = false;
   bool accept_doubtful = false;
   bool no_retry = false;
+  bool no_loops = false;
 };
 
 /// The value of `--preset` anywhere on the command line ("default" when absent or malformed: the
@@ -104,6 +106,7 @@ int run_simulate(const SimulateOptions& options) {
   minemap::sim::SimulationSettings settings;
   settings.mine.scans = options.scans;
   settings.mine.seed = options.seed;
+  settings.mine.loop_length_cm = 100.0 * options.loop_m;
   const auto start = std::chrono::steady_clock::now();
   const auto survey = minemap::sim::simulate_mine_survey(settings);
   fs::create_directories(options.out);
@@ -160,6 +163,7 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
   if (options.sparse_models) settings.dense_models = false;
   if (options.plain_icp) settings.icp.accelerate = false;
   if (options.no_retry) settings.retry_bound_factors.clear();
+  if (options.no_loops) settings.loops.enabled = false;
   settings.validate();
 
   io::SurveyReadSettings read;
@@ -262,6 +266,25 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
   }
   if (g_interrupted) throw Interrupted{};  // arrived while writing: the outputs are complete
 
+  // Loops: each candidate said, closed or not (an unclosed one leaves the drift it would have removed).
+  // A candidate not matched is normal when another scan of the same loop closed it (a scan in a
+  // cross-cut sees little of the start); only a survey whose candidates all failed is told so.
+  const bool any_closed =
+      std::any_of(result.loops.begin(), result.loops.end(), [](const LoopClosure& loop) { return loop.closed; });
+  for (const LoopClosure& loop : result.loops) {
+    const std::string& from = result.scans[loop.from].name;
+    const std::string& to = result.scans[loop.to].name;
+    if (loop.closed && !options.quiet) {
+      std::printf("loop closed: %s with %s: %.1f cm / %.2f deg apart before the relaxation, %.1f cm / %.2f deg after\n",
+                  to.c_str(), from.c_str(), loop.gap_before_cm, loop.gap_before_deg, loop.gap_after_cm,
+                  loop.gap_after_deg);
+    } else if (!loop.closed && !any_closed) {
+      std::fprintf(stderr,
+                   "minemap: loop not closed: %s stands near %s, but no match of the two was trusted (%s): the "
+                   "drift over the loop stays in the map\n",
+                   to.c_str(), from.c_str(), loop.doubt.c_str());
+    }
+  }
   if (!options.quiet) {
     std::printf("matched %zu scans: %d ICP iterations pairwise, %d in %d relaxation matches; %.2f s filter, "
                 "%.2f s trees, %.2f s pairwise, %.2f s relaxation\n",
@@ -313,6 +336,10 @@ int main(int argc, char** argv) {
   simulate->add_option("--out", sim.out, "Output folder")->required();
   simulate->add_option("--scans", sim.scans, "Number of scans (0 = the whole 250 m drive)");
   simulate->add_option("--seed", sim.seed, "Random seed");
+  simulate->add_option("--loop", sim.loop_m,
+                       "Drive a loop of about this many metres around the pillars right of the drive, back to the "
+                       "first scan's place, instead of the straight drive (0 = straight)")
+      ->check(CLI::NonNegativeNumber);
 
   MapOptions map;
   // The library's defaults, shown by --help; --preset picks another starting point, so it is read
@@ -392,6 +419,12 @@ int main(int argc, char** argv) {
   map_cmd->add_flag("--quiet", map.quiet, "Print nothing but errors");
   map_cmd->add_flag("--no-retry", map.no_retry,
                     "Do not try a doubtful match again from 4x and 16x the pair bound (coarse to fine)");
+  map_cmd->add_flag("--no-loop-closing", map.no_loops,
+                    "Do not close loops (a scan near one 12+ scans earlier matched against it, then the scan "
+                    "graph relaxed); the metascan then holds every nearby scan");
+  map_cmd->add_option("--loop-distance-cm", mapping.loops.max_distance_cm,
+                      "Loop candidates: scans whose positions are this close (cm)")
+      ->capture_default_str();
   map_cmd->add_flag("--accept-doubtful", map.accept_doubtful,
                     "Exit 0 even when a match was judged doubtful (still named on stderr and in report.json)");
   map_cmd->add_flag("--write-unregistered", map.write_unregistered,

@@ -72,6 +72,7 @@ RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedClo
                   "started out of reach; check it, give a closer start, or widen --max-pair-dist-cm",
                   health.moved_cm, health.moved_cm / reach, double(reach), settings.max_reach);
     health.doubt = text;
+    health.out_of_reach = true;
   } else if (health.paired_fraction < settings.min_paired_fraction) {
     std::snprintf(text, sizeof text, "only %.0f%% of its points paired within %g cm (fewer than %.0f%%): little overlap",
                   100.0 * health.paired_fraction, double(bound), 100.0 * settings.min_paired_fraction);

@@ -58,6 +58,10 @@ struct RegistrationHealth {
   float pair_bound_cm = 0.0f;      ///< the bound it was judged at (the match's own)
   float retry_bound_cm = 0.0f;     ///< > 0: trusted after a retry that started at this wider bound
   std::string doubt;               ///< empty: trusted; otherwise which test failed, with its figures
+  bool out_of_reach = false;       ///< the reach test failed (a good fit does not clear that doubt)
+  /// Judged again at the pose a loop closure's relaxation gave it, against every scan near it (the
+  /// fit figures are from then; the correction and reach from its match).
+  bool after_loop_closure = false;
   bool doubtful() const { return judged && !doubt.empty(); }
 };
 

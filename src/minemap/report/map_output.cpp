@@ -145,7 +145,8 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
                                 {"correction_deg", h.correction_deg},
                                 {"moved", h.moved_cm * unit_per_cm},
                                 {"pair_bound", h.pair_bound_cm * unit_per_cm},
-                                {"retry_bound", h.retry_bound_cm * unit_per_cm}};
+                                {"retry_bound", h.retry_bound_cm * unit_per_cm},
+                                {"judged_after_loop_closure", h.after_loop_closure}};
     }
   }
   report["scans"] = scans;
@@ -154,12 +155,25 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
   report["doubtful_scans"] = doubtful;
   report["icp_iterations"] = {{"step1", result.step1_icp_iterations}, {"step3", result.step3_icp_iterations}};
   report["relaxation_matches"] = result.relaxation_matches;
+  nlohmann::json loops = nlohmann::json::array();
+  for (const LoopClosure& loop : result.loops) {
+    loops.push_back({{"from", result.scans[loop.from].name},
+                     {"to", result.scans[loop.to].name},
+                     {"closed", loop.closed},
+                     {"doubt", loop.doubt},
+                     {"gap_before", loop.gap_before_cm * unit_per_cm},
+                     {"gap_before_deg", loop.gap_before_deg},
+                     {"gap_after", loop.gap_after_cm * unit_per_cm},
+                     {"gap_after_deg", loop.gap_after_deg}});
+  }
+  report["loop_closures"] = loops;
   const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   report["timings_s"] = {{"load", output.load_s},
                          {"filter", result.times.filter_s},
                          {"tree_build", result.times.tree_build_s},
                          {"pairwise", result.times.pairwise_s},
                          {"relaxation", result.times.relaxation_s},
+                         {"loop_closure", result.times.loop_closure_s},
                          {"write", write_s}};
   if (auto comparison = compare_with_truth(result, truth_cm)) {
     report["truth"] = {{"odometry", errors_json(comparison->odometry, unit_per_cm)},

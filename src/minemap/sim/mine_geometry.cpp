@@ -265,6 +265,18 @@ double MineWorld::drive_rib_x(int side, double z_cm, double clearance_cm) const 
   return kNaN;
 }
 
+std::vector<double> MineWorld::drive_crosscuts_z(int side) const {
+  const int row = drive_row_[side > 0 ? 1 : 0];
+  std::vector<double> centres;
+  if (row < 0) return centres;
+  const std::vector<int>& pillars = rows_[static_cast<std::size_t>(row)].pillars;
+  for (std::size_t k = 1; k < pillars.size(); ++k) {
+    centres.push_back(0.5 * (prisms_[static_cast<std::size_t>(pillars[k - 1])].z_max_cm +
+                             prisms_[static_cast<std::size_t>(pillars[k])].z_min_cm));
+  }
+  return centres;
+}
+
 void MineWorld::build_layout(const MineSettings& settings, double drive_end_z_cm) {
   const double mine_drive_end = std::max(settings.drive_length_cm, drive_end_z_cm);
   z_start_cm_ = -kMineBehindStartCm;

@@ -89,6 +89,9 @@ class MineWorld {
   std::span<const RockPrism> prisms() const { return prisms_; }
   std::span<const OrientedBox> boxes() const { return boxes_; }
   std::span<const EntrySpan> entries() const { return entries_; }
+  /// z of the cross-cuts through the pillar row next to the drive on `side` (+1 right, -1 left):
+  /// the middles of the gaps between its pillars, ascending.
+  std::vector<double> drive_crosscuts_z(int side) const;
   double z_start_cm() const { return z_start_cm_; }
   double z_end_cm() const { return z_end_cm_; }
   /// z of the broken roof bar (NaN when there is none).

@@ -14,8 +14,11 @@ namespace minemap::sim {
 
 SimulatedSurvey simulate_mine_survey(const SimulationSettings& settings) {
   const ScannerModel scanner(settings.scanner);
-  const std::vector<ScanStop> stops = plan_stops(settings.mine);
-  const MineWorld world(settings.mine, stops.back().z_cm);
+  // A loop lies inside the drive's mine; the straight drive may run past it (and lengthen it).
+  const bool loop = settings.mine.loop_length_cm > 0.0;
+  const std::vector<ScanStop> straight = loop ? std::vector<ScanStop>{} : plan_stops(settings.mine);
+  const MineWorld world(settings.mine, loop ? settings.mine.drive_length_cm : straight.back().z_cm);
+  const std::vector<ScanStop> stops = loop ? plan_loop_stops(settings.mine, world) : straight;
 
   SimulatedSurvey survey;
   survey.truth_cm.reserve(stops.size());

@@ -61,6 +61,11 @@ struct MineSettings {
   double ceiling_roughness_cm = 3.0;  ///< same for the roof
 
   // --- the drive ---
+  /// 0: the straight drive up the main entry. > 0: a loop of about this length around the pillars
+  /// right of the drive instead: up the drive, right through a cross-cut, back down the parallel
+  /// entry and through an earlier cross-cut to where it began. Its last stop is its first again
+  /// (same place and heading, up to the noise), so a mapper's first and last scans must agree.
+  double loop_length_cm = 0.0;
   double step_jitter = 0.1;           ///< scan positions vary by +-10 % of a step around even spacing
   double lateral_wander_cm = 30.0;    ///< the robot's weave around the drive's centre line
   double heading_sigma_deg = 1.0;     ///< the robot's heading around the path direction

@@ -1,5 +1,6 @@
 #include "minemap/sim/trajectory.hpp"
 
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -20,6 +21,9 @@ constexpr double kWeaveLongShare = 0.6;  ///< of lateral_wander_cm; the short wa
 // Groundhog: the front halves of two ATVs (wheel contact points of the robot).
 constexpr double kWheelbaseCm = 150.0;
 constexpr double kTrackCm = 120.0;
+
+/// A loop starts at the first cross-cut at least this far ahead of z = 0.
+constexpr double kLoopStartMinZCm = 300.0;
 
 /// Stream ids inside Stream::kDrive.
 constexpr std::uint64_t kWeaveStream = 0;
@@ -60,6 +64,61 @@ std::vector<ScanStop> plan_stops(const MineSettings& settings) {
     const double dx_dz = amp_long * k_long * std::cos(k_long * z + phase_long) +
                          amp_short * k_short * std::cos(k_short * z + phase_short);
     stops[static_cast<std::size_t>(k)] = {x, z, std::atan(dx_dz) / kRadPerDeg + heading_noise_deg};
+  }
+  return stops;
+}
+
+std::vector<ScanStop> plan_loop_stops(const MineSettings& settings, const MineWorld& world) {
+  if (!(settings.mean_step_cm > 0.0) || settings.step_jitter < 0.0 || settings.step_jitter >= 0.5) {
+    throw std::invalid_argument("mine settings: mean_step_cm > 0 and step_jitter in [0, 0.5) required");
+  }
+  const std::vector<double> crosscuts = world.drive_crosscuts_z(+1);
+  const auto entries = world.entries();
+  if (entries.size() < 2 || crosscuts.size() < 2) {
+    throw std::invalid_argument("loop survey: the mine needs a parallel entry and two cross-cuts right of the drive");
+  }
+  const double entry_x = 0.5 * (entries[1].x_min_cm + entries[1].x_max_cm);  // the first entry right of the drive
+  // Start at the first cross-cut ahead of z = 0; turn back at the one that makes the loop's
+  // length closest to the one asked for, within the drive.
+  std::size_t first = 0;
+  while (first < crosscuts.size() && crosscuts[first] < kLoopStartMinZCm) ++first;
+  std::size_t last = first + 1;
+  for (std::size_t k = first + 1; k < crosscuts.size() && crosscuts[k] <= settings.drive_length_cm; ++k) {
+    const auto length = [&](std::size_t j) { return 2.0 * (crosscuts[j] - crosscuts[first]) + 2.0 * entry_x; };
+    if (std::abs(length(k) - settings.loop_length_cm) < std::abs(length(last) - settings.loop_length_cm)) last = k;
+  }
+  if (last >= crosscuts.size() || crosscuts[last] > settings.drive_length_cm) {
+    throw std::invalid_argument("loop survey: no second cross-cut within the drive");
+  }
+  const double z_a = crosscuts[first], z_b = crosscuts[last];
+  const std::array<Eigen::Vector2d, 5> corners = {Eigen::Vector2d(0.0, z_a), Eigen::Vector2d(0.0, z_b),
+                                                  Eigen::Vector2d(entry_x, z_b), Eigen::Vector2d(entry_x, z_a),
+                                                  Eigen::Vector2d(0.0, z_a)};
+  double loop_cm = 0.0;
+  for (std::size_t k = 1; k < corners.size(); ++k) loop_cm += (corners[k] - corners[k - 1]).norm();
+  // The point at arc length s along the closed loop (x, z).
+  const auto at = [&](double s) {
+    s = std::fmod(std::fmod(s, loop_cm) + loop_cm, loop_cm);
+    for (std::size_t k = 1; k < corners.size(); ++k) {
+      const double leg = (corners[k] - corners[k - 1]).norm();
+      if (s <= leg) return Eigen::Vector2d(corners[k - 1] + (s / leg) * (corners[k] - corners[k - 1]));
+      s -= leg;
+    }
+    return corners.back();
+  };
+  const int steps = std::max(4, static_cast<int>(std::lround(loop_cm / settings.mean_step_cm)));
+  const double step = loop_cm / steps;
+  int count = steps + 1;
+  if (settings.scans > 0) count = std::min(count, settings.scans);
+  std::vector<ScanStop> stops(static_cast<std::size_t>(count));
+  for (int k = 0; k < count; ++k) {
+    CounterRng rng(key_for(settings.seed, Stream::kDrive, kFirstStopStream + static_cast<std::uint64_t>(k)));
+    const bool end = k == 0 || k == steps;
+    const double s = k * step + (end ? 0.0 : settings.step_jitter * step * rng.uniform(-1.0, 1.0));
+    const Eigen::Vector2d chord = at(s + 0.5 * step) - at(s - 0.5 * step);
+    const double heading_noise_deg = settings.heading_sigma_deg * rng.normal();
+    const Eigen::Vector2d p = at(s);
+    stops[static_cast<std::size_t>(k)] = {p.x(), p.y(), std::atan2(chord.x(), chord.y()) / kRadPerDeg + heading_noise_deg};
   }
   return stops;
 }

@@ -27,6 +27,12 @@ int planned_scan_count(const MineSettings& settings);
 /// around the centre line. Stop k is the same whatever the number of scans.
 std::vector<ScanStop> plan_stops(const MineSettings& settings);
 
+/// The stops of a loop survey (settings.loop_length_cm > 0) in `world`: around the pillar block
+/// right of the drive, one every mean_step_cm (jittered) along the loop, the last one back at the
+/// first. Each heading follows the loop (the chord from half a step behind to half a step ahead,
+/// so stops at a corner face between its two legs). settings.scans > 0 keeps the first stops only.
+std::vector<ScanStop> plan_loop_stops(const MineSettings& settings, const MineWorld& world);
+
 /// T_world_scan of a scanner `mount_height_cm` above the floor on a robot standing at `stop`:
 /// its four wheels rest on the floor, so height, pitch and roll follow the floor under them.
 Pose robot_pose_on_floor(const MineWorld& world, const ScanStop& stop, double mount_height_cm);

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <deque>
 #include <functional>
+#include <optional>
 #include <stdexcept>
 
 #include <tbb/parallel_for.h>
@@ -48,6 +49,11 @@ class SurveyMatcher {
     result_.backend = backend_.name() + ": " + backend_.device_description();
     prepare_all();
     match_all();
+    if (!result_.interrupted && settings_.loops.enabled && settings_.mode != MatchingMode::kSimultaneous) {
+      const auto start = Clock::now();
+      close_loops();
+      result_.times.loop_closure_s += seconds_since(start);
+    }
     result_.scans_matched = result_.interrupted ? result_.scans_matched : scans_.size();
     return std::move(result_);
   }
@@ -278,7 +284,8 @@ class SurveyMatcher {
   /// Built in the frame of scan i-1 (`frame`), so its float coordinates stay small wherever the
   /// survey is. Only model points that scan i can reach: inside its box at `at` grown by `grow_cm`. In a
   /// tunnel the nearby scans hold about ten times the points that lie there (docs/benchmarks.md).
-  std::shared_ptr<const PreparedCloud> build_metascan(std::size_t i, const Pose& frame, const Pose& at, double grow_cm) {
+  std::shared_ptr<const PreparedCloud> build_metascan(std::size_t i, const Pose& frame, const Pose& at, double grow_cm,
+                                                      bool whole_map = false) {
     const Pose frame_inverse = rigid_inverse(frame);
     std::vector<Eigen::Vector3f> union_points;
     const KdTree& own = states_[i].cloud->tree();
@@ -286,7 +293,12 @@ class SurveyMatcher {
     const Bounds3d reach = world_bounds(corners, frame_inverse * at);
     const Eigen::Vector3d reach_min = reach.min_cm.array() - grow_cm, reach_max = reach.max_cm.array() + grow_cm;
     // One task per nearby scan, concatenated in the list's order: the same union for any thread count.
-    const std::vector<std::size_t> near = nearby(i, i);
+    // whole_map: every other scan near it, earlier or later (judging the final map).
+    std::vector<std::size_t> near = nearby(i, whole_map ? scans_.size() : i);
+    if (settings_.loops.enabled && !whole_map) {  // recent scans only: a loop is the relaxation's to close
+      const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
+      std::erase_if(near, [&](std::size_t j) { return j + gap < i; });
+    }
     std::vector<std::vector<Eigen::Vector3f>> parts(near.size());
     tbb::parallel_for(std::size_t{0}, near.size(), [&](std::size_t k) {
       const Pose to_frame = frame_inverse * states_[near[k]].pose;
@@ -359,6 +371,110 @@ class SurveyMatcher {
           queued[j] = true;
         }
       }
+    }
+  }
+
+  /// A trusted match of scan j against scan i alone, from j's current pose, at each bound of
+  /// settings.loops.bound_factors in turn (a wide bound first, then the usual phases from there).
+  /// Empty when none is trusted; `doubt` then says what the last one was judged.
+  std::optional<Pose> loop_match(std::size_t i, std::size_t j, std::string& doubt) {
+    const std::vector<WorldModel> models = models_of({i});
+    const Pose start = states_[j].pose;
+    for (const float factor : settings_.loops.bound_factors) {
+      IcpSettings wide = icp_;
+      wide.max_pair_dist_cm = factor * icp_.max_pair_dist_cm;
+      if (wide.max_pair_dist_cm > settings_.max_retry_bound_cm) break;
+      wide.refine_pair_dist_fraction = 0.0f;
+      const IcpResult coarse = register_icp(backend_, *states_[j].cloud, start, models, wide);
+      if (!coarse.ok()) {
+        doubt = to_string(coarse.stop);
+        continue;
+      }
+      const IcpResult fine = register_icp(backend_, *states_[j].cloud, coarse.world_from_data, models, icp_);
+      if (!fine.ok()) {
+        doubt = to_string(fine.stop);
+        continue;
+      }
+      const RegistrationHealth health = judge_registration(backend_, *states_[j].probe, fine.world_from_data, start,
+                                                           models, icp_, settings_.health, wide.max_pair_dist_cm);
+      if (!health.doubtful()) return fine.world_from_data;
+      doubt = health.doubt;
+    }
+    return std::nullopt;
+  }
+
+  /// Loops (MappingSettings::loops): candidates by position, each matched, then one relaxation of
+  /// the scan graph over the chain of scan-to-scan steps and the loop edges that were trusted.
+  void close_loops() {
+    const std::size_t n = scans_.size();
+    const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
+    if (n <= gap) return;
+    std::vector<PoseGraphEdge> edges;
+    std::vector<Pose> poses(n);
+    for (std::size_t k = 0; k < n; ++k) poses[k] = states_[k].pose;
+    for (std::size_t k = 1; k < n; ++k) {
+      // A scan left at odometry constrains its neighbours only weakly.
+      const bool matched = result_.scans[k].registered && result_.scans[k - 1].registered;
+      edges.push_back({k - 1, k, rigid_inverse(poses[k - 1]) * poses[k], matched ? 1.0 : 0.01});
+    }
+    const std::size_t chain_edges = edges.size();
+    // For each scan, the nearest scan at least `gap` earlier, when near enough.
+    for (std::size_t j = gap; j < n && !stop_requested(); ++j) {
+      if (!result_.scans[j].registered) continue;
+      std::size_t best = n;
+      double best_distance = settings_.loops.max_distance_cm;
+      for (std::size_t i = 0; i + gap <= j; ++i) {
+        if (!result_.scans[i].registered) continue;
+        const double d = (poses[i].block<3, 1>(0, 3) - poses[j].block<3, 1>(0, 3)).norm();
+        if (d < best_distance) best = i, best_distance = d;
+      }
+      if (best == n) continue;
+      LoopClosure loop;
+      loop.from = best;
+      loop.to = j;
+      if (const std::optional<Pose> matched = loop_match(best, j, loop.doubt)) {
+        loop.closed = true;
+        const Pose moved = rigid_inverse(poses[j]) * *matched;
+        loop.gap_before_cm = translation_norm(moved);
+        loop.gap_before_deg = rotation_angle_deg(moved);
+        edges.push_back({best, j, rigid_inverse(poses[best]) * *matched, 1.0});
+      }
+      result_.loops.push_back(loop);
+    }
+    if (edges.size() == chain_edges) return;
+    const PoseGraphResult relaxed = optimise_pose_graph(poses, edges, 0, settings_.loops.graph);
+    for (std::size_t k = 1; k < n; ++k) {
+      states_[k].pose = relaxed.poses[k];
+      ScanOutcome& outcome = result_.scans[k];
+      outcome.world_from_points = relaxed.poses[k];
+      outcome.pose_cm = relaxed.poses[k] * states_[k].points_from_file;
+      outcome.frames.push_back({outcome.pose_cm, 1});
+    }
+    // The relaxation moved every scan: each is judged again where it ended, against the map of all
+    // scans near it. A scan that looked doubtful against a few recent scans (a corner that sees
+    // where the drive began) is then judged against the start too.
+    for (std::size_t k = 1; k < n && !stop_requested(); ++k) {
+      RegistrationHealth& old = result_.scans[k].health;
+      if (!result_.scans[k].registered || !old.judged || old.out_of_reach) continue;
+      const Pose& pose = states_[k].pose;
+      const auto map = build_metascan(k, pose, pose, double(icp_.max_pair_dist_cm), /*whole_map=*/true);
+      const std::vector<WorldModel> models{{map.get(), pose}};
+      RegistrationHealth health = judge_registration(backend_, *states_[k].probe, pose, pose, models, icp_,
+                                                     settings_.health);
+      health.correction_cm = old.correction_cm;
+      health.correction_deg = old.correction_deg;
+      health.moved_cm = old.moved_cm;
+      health.retry_bound_cm = old.retry_bound_cm;
+      health.after_loop_closure = true;
+      old = health;
+    }
+    std::size_t edge = chain_edges;
+    for (LoopClosure& loop : result_.loops) {
+      if (!loop.closed) continue;
+      const Pose wanted = relaxed.poses[loop.from] * edges[edge++].from_to;
+      const Pose left = rigid_inverse(relaxed.poses[loop.to]) * wanted;
+      loop.gap_after_cm = translation_norm(left);
+      loop.gap_after_deg = rotation_angle_deg(left);
     }
   }
 
@@ -457,6 +573,7 @@ void MappingSettings::validate() const {
     if (!(factor > 1.0f) || !std::isfinite(factor)) throw std::invalid_argument("retry bound factors must be > 1");
   }
   if (!(max_retry_bound_cm > 0.0f)) throw std::invalid_argument("the widest retry bound must be > 0 cm");
+  loops.validate();
   health.validate();
   if (reduction == Reduction::kVoxel && (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm))) {
     throw std::invalid_argument("the voxel size must be a finite length > 0 cm");
@@ -466,6 +583,19 @@ void MappingSettings::validate() const {
   }
   if (!(metascan_margin_cm >= 0.0) || !std::isfinite(metascan_margin_cm)) {
     throw std::invalid_argument("the metascan margin must be a finite length >= 0 cm");
+  }
+}
+
+void LoopClosureSettings::validate() const {
+  if (min_scan_gap < 2) throw std::invalid_argument("a loop must join scans at least 2 apart");
+  if (!(max_distance_cm > 0.0) || !std::isfinite(max_distance_cm)) {
+    throw std::invalid_argument("the loop candidates' distance must be a finite length > 0 cm");
+  }
+  for (const float factor : bound_factors) {
+    if (!(factor >= 1.0f) || !std::isfinite(factor)) throw std::invalid_argument("loop bound factors must be >= 1");
+  }
+  if (!(graph.translation_sigma_cm > 0.0) || !(graph.rotation_sigma_rad > 0.0) || graph.max_iterations < 1) {
+    throw std::invalid_argument("the pose graph needs sigmas > 0 and at least one iteration");
   }
 }
 

@@ -29,6 +29,7 @@
 #include "minemap/io/formats.hpp"
 #include "minemap/registration/health.hpp"
 #include "minemap/registration/icp.hpp"
+#include "minemap/slam/pose_graph.hpp"
 
 namespace minemap {
 
@@ -43,6 +44,23 @@ const char* to_string(Reduction reduction);
 Reduction parse_reduction(const std::string& text);  ///< "slices", "voxel"
 const char* to_string(MatchingMode mode);
 MatchingMode parse_matching_mode(const std::string& text);  ///< "pairwise", "incremental", "simultaneous"
+
+/// Closing loops (pairwise and incremental matching; slam/pose_graph.hpp). After the last scan, a
+/// scan that stands near one at least min_scan_gap scans earlier is matched against it; each trusted
+/// match is an edge of the scan graph, with the chain of matches from scan to scan, and a global
+/// relaxation of the graph spreads what the loop measured over the whole loop, as 3DTK's LUM does.
+/// While matching, the metascan then holds only the last min_scan_gap scans, so a loop is closed by
+/// the relaxation, not by one scan's jump where the drive meets its start.
+struct LoopClosureSettings {
+  bool enabled = true;
+  int min_scan_gap = 12;             ///< a loop joins scans at least this many apart (48 m at 4 m steps)
+  double max_distance_cm = 1000.0;   ///< candidates: scans whose positions are this close
+  /// The pair bounds a loop match tries, coarse to fine, until one is trusted: what has drifted
+  /// further than this over the loop is not closed (and said so).
+  std::vector<float> bound_factors = {1.0f, 4.0f, 16.0f};
+  PoseGraphSettings graph;
+  void validate() const;
+};
 
 /// Everything map_survey takes. MappingSettings{} is minemap's default, the whole-survey mode: each
 /// scan, reduced to 15 cm voxel means, is matched once against the metascan of the registered scans
@@ -91,6 +109,7 @@ struct MappingSettings {
   std::vector<float> retry_bound_factors = {4.0f, 16.0f};
   /// No retry starts wider than this: at tens of metres every surface pairs with some other one.
   float max_retry_bound_cm = 400.0f;
+  LoopClosureSettings loops;
 
   /// minemap's mapping ICP: IcpSettings::mapping() refined at 7.5 cm (0.3 x 25 cm), a phase
   /// converged when a step moves less than 1 mm and turns less than 0.01° (1.7 mm at 10 m), well
@@ -110,6 +129,7 @@ struct MappingSettings {
     settings.mode = MatchingMode::kSimultaneous;
     settings.reduction = Reduction::kSlices;
     settings.icp = IcpSettings::mapping();
+    settings.loops.enabled = false;  // the relaxation is the paper's own
     return settings;
   }
   /// The paper's method: simultaneous matching, slice filter, models reduced like the data, plain
@@ -143,7 +163,16 @@ struct ScanOutcome {
 };
 
 struct StageTimes {
-  double filter_s = 0, tree_build_s = 0, pairwise_s = 0, relaxation_s = 0;
+  double filter_s = 0, tree_build_s = 0, pairwise_s = 0, relaxation_s = 0, loop_closure_s = 0;
+};
+
+/// A loop the closing step found: scan `to` stands near the earlier scan `from`.
+struct LoopClosure {
+  std::size_t from = 0, to = 0;
+  bool closed = false;              ///< a trusted match joined them (an edge of the relaxation)
+  std::string doubt;                ///< when not closed: why
+  double gap_before_cm = 0, gap_before_deg = 0;  ///< where the match put `to`, against its pose before
+  double gap_after_cm = 0, gap_after_deg = 0;    ///< the same after the relaxation
 };
 
 struct MappingResult {
@@ -155,6 +184,7 @@ struct MappingResult {
   int step1_icp_iterations = 0;  ///< Table I: ICP iterations of the pairwise step
   int step3_icp_iterations = 0;  ///< Table I: ICP iterations of the relaxation
   int relaxation_matches = 0;
+  std::vector<LoopClosure> loops;  ///< every loop candidate tried (MappingSettings::loops)
   /// Stopped on request (map_survey's stop_requested) after `scans_matched` scans (0..k-1 hold their
   /// final poses; the rest are untouched); a complete run has scans_matched == scans.size().
   bool interrupted = false;
