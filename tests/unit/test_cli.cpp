@@ -43,6 +43,28 @@ TEST(Cli, SimulateThenMapWritesEveryOutputAndReportsTruthErrors) {
   }
 }
 
+// `simulate --loop` writes a survey that returns to its start; `map` closes the loop, says so, and
+// reports it; --no-loop-closing leaves it open.
+TEST(Cli, ALoopSurveyIsClosedAndReported) {
+  TempDir dir;
+  std::string output;
+  const std::string survey = (dir / "loop").string();
+  ASSERT_EQ(run_cli("simulate --out " + survey + " --loop 80", &output), 0) << output;
+  ASSERT_EQ(run_cli("map " + survey + " --out " + (dir / "out").string() + " --backend cpu", &output), 0) << output;
+  EXPECT_FALSE(lines_containing(output, "loop closed:").empty()) << output;
+  std::ifstream in(dir / "out" / "report.json");
+  const auto report = nlohmann::json::parse(in);
+  ASSERT_FALSE(report["loop_closures"].empty());
+  bool closed = false;
+  for (const auto& loop : report["loop_closures"]) closed = closed || loop["closed"].get<bool>();
+  EXPECT_TRUE(closed);
+  EXPECT_TRUE(report["doubtful_scans"].empty());
+  ASSERT_EQ(run_cli("map " + survey + " --out " + (dir / "open").string() + " --backend cpu --no-loop-closing", &output),
+            0)
+      << output;
+  EXPECT_TRUE(lines_containing(output, "loop closed:").empty()) << output;
+}
+
 TEST(Cli, BadInputNamesFileAndLineAndLeavesTheOutputFolderAsItWas) {
   TempDir dir;
   std::filesystem::create_directories(dir / "survey");

@@ -418,28 +418,47 @@ class SurveyMatcher {
       edges.push_back({k - 1, k, rigid_inverse(poses[k - 1]) * poses[k], matched ? 1.0 : 0.01});
     }
     const std::size_t chain_edges = edges.size();
-    // For each scan, the nearest scan at least `gap` earlier, when near enough.
-    for (std::size_t j = gap; j < n && !stop_requested(); ++j) {
+    // For each scan, the nearest scan at least `gap` earlier, when near enough. Scans in a row that
+    // all have one are one return to a known place: one loop edge for it, from the pair that stands
+    // closest (the others see less of each other: a scan in a cross-cut against one in the drive),
+    // the next closest tried when a match is not trusted. Several edges of one return would pull
+    // the relaxation towards their disagreement.
+    struct Candidate {
+      std::size_t from, to;
+      double distance_cm;
+    };
+    std::vector<std::vector<Candidate>> returns;
+    for (std::size_t j = gap; j < n; ++j) {
       if (!result_.scans[j].registered) continue;
-      std::size_t best = n;
-      double best_distance = settings_.loops.max_distance_cm;
+      Candidate best{n, j, settings_.loops.max_distance_cm};
       for (std::size_t i = 0; i + gap <= j; ++i) {
         if (!result_.scans[i].registered) continue;
         const double d = (poses[i].block<3, 1>(0, 3) - poses[j].block<3, 1>(0, 3)).norm();
-        if (d < best_distance) best = i, best_distance = d;
+        if (d < best.distance_cm) best = {i, j, d};
       }
-      if (best == n) continue;
-      LoopClosure loop;
-      loop.from = best;
-      loop.to = j;
-      if (const std::optional<Pose> matched = loop_match(best, j, loop.doubt)) {
-        loop.closed = true;
-        const Pose moved = rigid_inverse(poses[j]) * *matched;
-        loop.gap_before_cm = translation_norm(moved);
-        loop.gap_before_deg = rotation_angle_deg(moved);
-        edges.push_back({best, j, rigid_inverse(poses[best]) * *matched, 1.0});
+      if (best.from == n) continue;
+      if (returns.empty() || returns.back().back().to + 1 != j) returns.emplace_back();
+      returns.back().push_back(best);
+    }
+    for (std::vector<Candidate>& candidates : returns) {
+      std::stable_sort(candidates.begin(), candidates.end(),
+                       [](const Candidate& a, const Candidate& b) { return a.distance_cm < b.distance_cm; });
+      for (const Candidate& candidate : candidates) {
+        if (stop_requested()) return;
+        LoopClosure loop;
+        loop.from = candidate.from;
+        loop.to = candidate.to;
+        const std::optional<Pose> matched = loop_match(loop.from, loop.to, loop.doubt);
+        if (matched) {
+          loop.closed = true;
+          const Pose moved = rigid_inverse(poses[loop.to]) * *matched;
+          loop.gap_before_cm = translation_norm(moved);
+          loop.gap_before_deg = rotation_angle_deg(moved);
+          edges.push_back({loop.from, loop.to, rigid_inverse(poses[loop.from]) * *matched, 1.0});
+        }
+        result_.loops.push_back(loop);
+        if (loop.closed) break;
       }
-      result_.loops.push_back(loop);
     }
     if (edges.size() == chain_edges) return;
     const PoseGraphResult relaxed = optimise_pose_graph(poses, edges, 0, settings_.loops.graph);
