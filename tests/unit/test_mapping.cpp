@@ -52,6 +52,44 @@ TEST(MappingSimulatedMine, SimultaneousMatchingIsAccurateAndBeatsPairwise) {
   EXPECT_GT(simultaneous.step3_icp_iterations, 0);
 }
 
+// The relaxation's bounds (a few matches after each new scan, the rest queued for later; a union of
+// the nearest overlapping scans) keep the cost per scan flat (bench/time_per_scan.sh); they must not
+// cost accuracy against the paper's queue, emptied after every scan over every overlapping scan.
+TEST(MappingSimulatedMine, TheBoundedRelaxationIsAsAccurateAsThePapersQueue) {
+  const auto survey = small_survey(12);
+  CpuBackend cpu;
+  MappingSettings settings = MappingSettings::simultaneous();
+  // A match that moves a scan by more than 1 cm re-queues its neighbours: the queue grows.
+  settings.moved_translation_cm = 1.0;
+  settings.moved_rotation_deg = 0.05;
+  const auto bounded = map_survey(survey.scans, settings, cpu);
+  settings.max_relaxation_matches_per_scan = 1;
+  settings.max_relaxation_neighbours = 2;
+  const auto tight = map_survey(survey.scans, settings, cpu);
+  settings.max_relaxation_matches_per_scan = 0;
+  settings.max_relaxation_neighbours = 0;
+  const auto unbounded = map_survey(survey.scans, settings, cpu);
+  for (const auto* result : {&bounded, &tight, &unbounded}) {
+    ASSERT_TRUE(result->all_registered());
+    EXPECT_TRUE(result->doubtful().empty());
+  }
+  const std::size_t n = survey.scans.size();
+  // At most one match after each of scans 1..n-1, then at most 2 per scan to empty the queue.
+  EXPECT_LE(static_cast<std::size_t>(tight.relaxation_matches), (n - 1) + 2 * n);
+  EXPECT_GT(static_cast<std::size_t>(tight.relaxation_matches), n - 1);  // what waited was matched later
+  EXPECT_GT(unbounded.relaxation_matches, tight.relaxation_matches);
+  for (std::size_t i = 1; i < n; ++i) EXPECT_GT(bounded.scans[i].match_s, 0.0) << i;
+  const double e_bounded = pose_errors(poses_of(bounded), survey.truth_cm).mean_translation_cm;
+  const double e_tight = pose_errors(poses_of(tight), survey.truth_cm).mean_translation_cm;
+  const double e_unbounded = pose_errors(poses_of(unbounded), survey.truth_cm).mean_translation_cm;
+  std::printf("mean error: default bounds %.2f cm (%d matches), 1 match / 2 neighbours %.2f cm (%d), unbounded %.2f cm "
+              "(%d)\n",
+              e_bounded, bounded.relaxation_matches, e_tight, tight.relaxation_matches, e_unbounded,
+              unbounded.relaxation_matches);
+  EXPECT_LE(e_bounded, 1.25 * e_unbounded + 1.0);
+  EXPECT_LE(e_tight, 2.0 * e_unbounded + 2.0);
+}
+
 TEST(MappingSimulatedMine, IncrementalMatchingBeatsOdometry) {
   const auto survey = small_survey(8, 11);
   MappingSettings settings;

@@ -60,6 +60,7 @@ struct SimulateOptions {
   int scans = 0;
   std::uint32_t seed = 1;
   double loop_m = 0.0;
+  double step_m = minemap::sim::MineSettings{}.mean_step_cm / 100.0;
 };
 
 /// What `map` takes beyond MappingSettings (which the options bind to directly: its defaults are
@@ -107,6 +108,7 @@ int run_simulate(const SimulateOptions& options) {
   settings.mine.scans = options.scans;
   settings.mine.seed = options.seed;
   settings.mine.loop_length_cm = 100.0 * options.loop_m;
+  settings.mine.mean_step_cm = 100.0 * options.step_m;
   const auto start = std::chrono::steady_clock::now();
   const auto survey = minemap::sim::simulate_mine_survey(settings);
   fs::create_directories(options.out);
@@ -340,6 +342,11 @@ int main(int argc, char** argv) {
                        "Drive a loop of about this many metres around the pillars right of the drive, back to the "
                        "first scan's place, instead of the straight drive (0 = straight)")
       ->check(CLI::NonNegativeNumber);
+  simulate->add_option("--step-m", sim.step_m,
+                       "Mean distance between scan positions (metres): 4 for stop-and-go as the paper, under 1 for a "
+                       "survey where most scans see each other, as a moving LiDAR's")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
 
   MapOptions map;
   // The library's defaults, shown by --help; --preset picks another starting point, so it is read
@@ -409,7 +416,13 @@ int main(int argc, char** argv) {
   map_cmd->add_option("--moved-rotation-deg", mapping.moved_rotation_deg, "...or turns it more than this")
       ->capture_default_str();
   map_cmd->add_option("--max-relaxation-matches", mapping.max_relaxation_matches_per_scan,
-                      "Cap on relaxation matches after each new scan (0 = 4 x scans so far)");
+                      "Relaxation matches after each new scan; the rest wait for the next scan (0 = empty the "
+                      "queue every time, as the paper)")
+      ->capture_default_str();
+  map_cmd->add_option("--max-relaxation-neighbours", mapping.max_relaxation_neighbours,
+                      "Relaxation: match a scan against at most this many overlapping scans, nearest first "
+                      "(0 = all, as the paper)")
+      ->capture_default_str();
   map_cmd->add_option("--points-per-slice", map.points_per_slice, "uos files without slice markers: points per slice");
   map_cmd->add_option("--initial-poses", map.initial_poses,
                       "Initial poses (TUM, KITTI, 4x4 or graph file; commas allowed), one per scan in the order printed");

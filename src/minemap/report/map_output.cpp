@@ -175,6 +175,10 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
                          {"relaxation", result.times.relaxation_s},
                          {"loop_closure", result.times.loop_closure_s},
                          {"write", write_s}};
+  // The cost of each new scan (its match, and the relaxation's share after it), in scan order.
+  std::vector<double> per_scan;
+  for (const auto& s : result.scans) per_scan.push_back(s.match_s);
+  report["timings_s"]["per_scan"] = per_scan;
   if (auto comparison = compare_with_truth(result, truth_cm)) {
     report["truth"] = {{"odometry", errors_json(comparison->odometry, unit_per_cm)},
                        {"registered", errors_json(comparison->registered, unit_per_cm)}};

@@ -286,19 +286,26 @@ class SurveyMatcher {
   /// tunnel the nearby scans hold about ten times the points that lie there (docs/benchmarks.md).
   std::shared_ptr<const PreparedCloud> build_metascan(std::size_t i, const Pose& frame, const Pose& at, double grow_cm,
                                                       bool whole_map = false) {
-    const Pose frame_inverse = rigid_inverse(frame);
-    std::vector<Eigen::Vector3f> union_points;
-    const KdTree& own = states_[i].cloud->tree();
-    const std::array<Eigen::Vector3f, 2> corners = {own.bounds_min(), own.bounds_max()};
-    const Bounds3d reach = world_bounds(corners, frame_inverse * at);
-    const Eigen::Vector3d reach_min = reach.min_cm.array() - grow_cm, reach_max = reach.max_cm.array() + grow_cm;
-    // One task per nearby scan, concatenated in the list's order: the same union for any thread count.
     // whole_map: every other scan near it, earlier or later (judging the final map).
     std::vector<std::size_t> near = nearby(i, whole_map ? scans_.size() : i);
     if (settings_.loops.enabled && !whole_map) {  // recent scans only: a loop is the relaxation's to close
       const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
       std::erase_if(near, [&](std::size_t j) { return j + gap < i; });
     }
+    return build_union(i, near, frame, at, grow_cm);
+  }
+
+  /// One kd-tree, in the frame `frame`, of the model points of scans `near` that scan i can reach
+  /// at `at`: inside its box grown by `grow_cm`.
+  std::shared_ptr<const PreparedCloud> build_union(std::size_t i, const std::vector<std::size_t>& near,
+                                                   const Pose& frame, const Pose& at, double grow_cm) {
+    const Pose frame_inverse = rigid_inverse(frame);
+    std::vector<Eigen::Vector3f> union_points;
+    const KdTree& own = states_[i].cloud->tree();
+    const std::array<Eigen::Vector3f, 2> corners = {own.bounds_min(), own.bounds_max()};
+    const Bounds3d reach = world_bounds(corners, frame_inverse * at);
+    const Eigen::Vector3d reach_min = reach.min_cm.array() - grow_cm, reach_max = reach.max_cm.array() + grow_cm;
+    // One task per scan, concatenated in the list's order: the same union for any thread count.
     std::vector<std::vector<Eigen::Vector3f>> parts(near.size());
     tbb::parallel_for(std::size_t{0}, near.size(), [&](std::size_t k) {
       const Pose to_frame = frame_inverse * states_[near[k]].pose;
@@ -330,21 +337,20 @@ class SurveyMatcher {
     });
   }
 
-  /// Steps 2 and 3 after scan `newest` arrived: the queue-based relaxation over scans 0..newest.
-  void relax(std::size_t newest) {
-    std::deque<std::size_t> queue{newest};
-    std::vector<bool> queued(newest + 1, false);
-    queued[newest] = true;
-    const int cap = settings_.max_relaxation_matches_per_scan > 0 ? settings_.max_relaxation_matches_per_scan
-                                                                   : 4 * static_cast<int>(newest + 1);
-    int matches = 0;
-    while (!queue.empty() && matches < cap && !stop_requested()) {
-      const std::size_t current = queue.front();
-      queue.pop_front();
-      queued[current] = false;
-      if (current == 0) continue;  // the master scan is fixed
+  /// Steps 2 and 3 after scan `newest` arrived: the queue-based relaxation over scans 0..newest,
+  /// at most `budget` matches. The queue persists between calls: the new scan goes first (the
+  /// caller puts it there, step 2), and what the budget left waits for the next call.
+  void relax(std::size_t newest, int budget) {
+    const std::size_t max_neighbours = static_cast<std::size_t>(settings_.max_relaxation_neighbours);
+    const double grow_cm = double(icp_.max_pair_dist_cm) + settings_.metascan_margin_cm;
+    for (int matches = 0; !queue_.empty() && matches < budget && !stop_requested();) {
+      const std::size_t current = queue_.front();
+      queue_.pop_front();
+      queued_[current] = false;
+      // The overlapping scans, nearest first (nearby's order), at most max_neighbours of them.
       std::vector<std::size_t> neighbours;
       for (std::size_t j : nearby(current, newest + 1)) {
+        if (max_neighbours > 0 && neighbours.size() == max_neighbours) break;
         const WorldModel model{states_[j].model_cloud.get(), states_[j].pose};
         const std::size_t pairs = count_pairs(backend_, *states_[current].cloud, states_[current].pose, model,
                                               settings_.icp.max_pair_dist_cm);
@@ -352,7 +358,8 @@ class SurveyMatcher {
       }
       if (neighbours.empty()) continue;
       const Pose before = states_[current].pose;
-      const auto models = models_of(neighbours);
+      const auto metascan = build_union(current, neighbours, before, before, grow_cm);
+      const std::vector<WorldModel> models{{metascan.get(), before}};
       const IcpResult match = register_icp(backend_, *states_[current].cloud, before, models, icp_);
       ++matches;
       ++result_.relaxation_matches;
@@ -366,9 +373,9 @@ class SurveyMatcher {
                          rotation_angle_deg(change) > settings_.moved_rotation_deg;
       if (!moved) continue;
       for (std::size_t j : neighbours) {
-        if (j != 0 && !queued[j]) {
-          queue.push_back(j);
-          queued[j] = true;
+        if (j != 0 && !queued_[j]) {
+          queue_.push_back(j);
+          queued_[j] = true;
         }
       }
     }
@@ -505,19 +512,30 @@ class SurveyMatcher {
         result_.scans_matched = i;
         return;
       }
-      auto start = Clock::now();
+      const auto arrived = Clock::now();
       switch (settings_.mode) {
         case MatchingMode::kPairwise: match_pairwise(i); break;
         case MatchingMode::kIncremental: match_incremental(i); break;
         case MatchingMode::kSimultaneous: match_pairwise(i); break;
       }
-      result_.times.pairwise_s += seconds_since(start);
+      result_.times.pairwise_s += seconds_since(arrived);
       if (settings_.mode == MatchingMode::kSimultaneous) {
-        start = Clock::now();
-        relax(i);
+        const auto start = Clock::now();
+        queued_.resize(i + 1, false);  // step 2: the new scan first (no scan before it could queue it)
+        queue_.push_front(i);
+        queued_[i] = true;
+        const int per_scan = settings_.max_relaxation_matches_per_scan;
+        relax(i, per_scan > 0 ? per_scan : 4 * static_cast<int>(i + 1));
         result_.times.relaxation_s += seconds_since(start);
       }
+      result_.scans[i].match_s = seconds_since(arrived);
       report(i + 1, to_string(settings_.mode));
+    }
+    if (settings_.mode == MatchingMode::kSimultaneous && !stop_requested() && !queue_.empty()) {
+      // What the per-scan budget left: matched now, at most 2 per scan.
+      const auto start = Clock::now();
+      relax(scans_.size() - 1, 2 * static_cast<int>(scans_.size()));
+      result_.times.relaxation_s += seconds_since(start);
     }
     if (settings_.mode == MatchingMode::kSimultaneous && stop_requested()) {  // the last relaxation cut short
       result_.interrupted = true;
@@ -533,6 +551,8 @@ class SurveyMatcher {
   IcpSettings icp_;  ///< settings.icp with min_pairs capped by the overlap threshold
   std::vector<ScanState> states_;
   MappingResult result_;
+  std::deque<std::size_t> queue_;  ///< kSimultaneous: scans waiting for a relaxation match
+  std::vector<bool> queued_;       ///< queued_[j]: scan j is in queue_
   bool unstructured_noted_ = false;
 };
 
@@ -588,6 +608,7 @@ void MappingSettings::validate() const {
   if (model_slice_stride < 1) throw std::invalid_argument("model slice stride must be >= 1");
   if (min_overlap_pairs < 0) throw std::invalid_argument("the overlap threshold must be >= 0 pairs");
   if (max_relaxation_matches_per_scan < 0) throw std::invalid_argument("the relaxation cap must be >= 0");
+  if (max_relaxation_neighbours < 0) throw std::invalid_argument("the relaxation's neighbour cap must be >= 0");
   for (const float factor : retry_bound_factors) {
     if (!(factor > 1.0f) || !std::isfinite(factor)) throw std::invalid_argument("retry bound factors must be > 1");
   }

@@ -9,9 +9,11 @@
 //    3. until the queue is empty: the front scan (unless it is the master, scan 0, which is fixed)
 //       is matched against the union of all scans overlapping it (overlap: more than 250 point
 //       pairs); if that moved it, each neighbour not in the queue is appended.
-//    The union is searched through each neighbour's own kd-tree (no tree of the union is rebuilt);
-//    neighbour candidates are prefiltered by world bounds, so finding them costs one pairing pass
-//    per nearby scan, not an ICP run per scan pair.
+//    The union is one kd-tree of the neighbours' points that the scan can reach (a metascan, as
+//    in the incremental mode): a query searches one tree, not one per neighbour. Neighbour
+//    candidates are prefiltered by world bounds, so finding them costs one pairing pass per nearby
+//    scan, not an ICP run per scan pair. minemap's default bounds both the union and the matches
+//    after each new scan (MappingSettings::max_relaxation_*), so the cost per scan stays flat.
 //
 // The search, the sums and the slice filter run in the compute backend the caller hands in
 // (backend/compute_backend.hpp); the voxel reduction, Horn's method and the matching schedule run
@@ -99,7 +101,16 @@ struct MappingSettings {
   int min_overlap_pairs = 250;
   double moved_translation_cm = 5.0;      ///< step 3c: a match "moved" the scan beyond this...
   double moved_rotation_deg = 0.25;       ///< ...or this
-  int max_relaxation_matches_per_scan = 0;  ///< cap on step-3 matches after one new scan; 0 = 4 x scans so far
+  /// kSimultaneous, step 3: a scan is matched against the union of at most this many scans that
+  /// overlap it, the nearest first (0: every one, as the paper). Where every scan sees every other
+  /// (a hall, a handheld loop) the union, and the cost of each new scan, would grow with the survey.
+  int max_relaxation_neighbours = 8;
+  /// kSimultaneous, step 3: matches after one new scan. What is still queued then waits for the
+  /// next scan (the queue persists, the new scan goes first), and after the last scan the queue is
+  /// matched until it is empty or 2 x scans matches were made: the cost per new scan stays flat as
+  /// the survey grows (docs/benchmarks.md, time per scan). 0: the queue is emptied after every scan,
+  /// as the paper, with at most 4 x scans so far matches.
+  int max_relaxation_matches_per_scan = 8;
   /// Every match is judged (registration/health.hpp); a doubtful one is named in ScanOutcome::health.
   HealthSettings health;
   /// Pairwise and incremental matching: a doubtful match is tried again from the same start at these
@@ -138,6 +149,8 @@ struct MappingSettings {
     MappingSettings settings = simultaneous();
     settings.icp = IcpSettings::paper();
     settings.dense_models = false;
+    settings.max_relaxation_neighbours = 0;
+    settings.max_relaxation_matches_per_scan = 0;
     return settings;
   }
   /// Throws std::invalid_argument naming the bad setting (map_survey calls it once, at entry).
@@ -153,6 +166,9 @@ struct ScanOutcome {
   IcpResult last_match;                     ///< the last ICP run that moved it (pairwise or relaxation)
   RegistrationHealth health;                ///< how far last_match can be trusted
   int relaxation_matches = 0;               ///< step-3 matches of this scan
+  /// Seconds spent when this scan arrived: its own match and (kSimultaneous) the relaxation after
+  /// it; the cost per new scan (loop closing and the last relaxation are in MappingResult::times).
+  double match_s = 0;
   std::size_t points_in = 0;                ///< points read
   std::size_t points_used = 0;              ///< points after filtering, used for matching
   std::size_t outliers_replaced = 0;
