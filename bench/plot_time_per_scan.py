@@ -18,10 +18,11 @@ import sys
 def summarise(name, report_path, start_s, end_s):
     with open(report_path) as f:
         report = json.load(f)
-    per_scan = report["timings_s"]["per_scan"]
+    # An older minemap (--baseline) has no per-scan figures: its totals only.
+    per_scan = report["timings_s"].get("per_scan", [])
     quarter = max(1, len(per_scan) // 4)
-    first = statistics.mean(per_scan[1:1 + quarter])  # scan 0 is the master: nothing to match
-    last = statistics.mean(per_scan[-quarter:])
+    first = statistics.mean(per_scan[1:1 + quarter]) if per_scan else None  # scan 0 is the master
+    last = statistics.mean(per_scan[-quarter:]) if per_scan else None
     truth = report.get("truth", {}).get("registered", {})
     return {
         "name": name,
@@ -32,7 +33,7 @@ def summarise(name, report_path, start_s, end_s):
         "timings_s": {k: v for k, v in report["timings_s"].items() if k != "per_scan"},
         "mean_per_scan_s_first_quarter": first,
         "mean_per_scan_s_last_quarter": last,
-        "last_over_first": last / first if first > 0 else None,
+        "last_over_first": last / first if first else None,
         "mean_translation_error": truth.get("mean_translation"),
         "unit": report.get("unit"),
         "per_scan_s": per_scan,
@@ -53,10 +54,15 @@ def main():
         json.dump(runs, f, indent=2)
     for r in runs:
         error = r["mean_translation_error"]
-        print(f"{r['name']:13s} wall {r['wall_s']:7.1f} s  relaxation {r['timings_s']['relaxation']:7.1f} s "
-              f"({r['relaxation_matches']} matches)  per scan: first quarter {r['mean_per_scan_s_first_quarter']:.3f} s, "
-              f"last quarter {r['mean_per_scan_s_last_quarter']:.3f} s (x{r['last_over_first']:.2f})"
-              + (f"  mean error {error:.1f} {r['unit']}" if error is not None else ""))
+        line = (f"{r['name']:13s} wall {r['wall_s']:7.1f} s  pairwise {r['timings_s']['pairwise']:6.1f} s  relaxation "
+                f"{r['timings_s']['relaxation']:7.1f} s ({r['relaxation_matches']} matches)  loops "
+                f"{r['timings_s'].get('loop_closure', 0.0):5.1f} s")
+        if r["per_scan_s"]:
+            line += (f"  per scan: first quarter {r['mean_per_scan_s_first_quarter']:.3f} s, last quarter "
+                     f"{r['mean_per_scan_s_last_quarter']:.3f} s (x{r['last_over_first']:.2f})")
+        if error is not None:
+            line += f"  mean error {error:.1f} {r['unit']}"
+        print(line)
     try:
         import matplotlib
     except ImportError:
@@ -66,7 +72,7 @@ def main():
     matplotlib.rcParams["svg.hashsalt"] = "minemap"  # the same file for the same figures
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(8, 4.5))
-    for r in runs:
+    for r in (r for r in runs if r["per_scan_s"]):
         ax.plot(range(len(r["per_scan_s"])), r["per_scan_s"], label=f"{r['name']} ({r['wall_s']:.0f} s in all)",
                 linewidth=1)
     ax.set_xlabel("scan index")

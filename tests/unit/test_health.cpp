@@ -59,6 +59,45 @@ TEST_F(Health, ACloudOnItselfIsTrusted) {
   EXPECT_NEAR(health.moved_cm, std::sqrt(10.0 * 10 + 5 * 5 + 3 * 3), 1e-9);  // a translation moves every point alike
 }
 
+TEST_F(Health, ASmoothTunnelIsDegenerateARoomCornerIsNot) {
+  // The corner pins every direction: measured, and trusted.
+  const SurfaceNormals corner_planes(room_corner(), 50.0f);
+  const WorldModel corner{cloud.get(), Pose::Identity()};
+  const RegistrationHealth boxed =
+      judge_registration(cpu, *cloud, Pose::Identity(), Pose::Identity(), {&corner, 1}, icp, settings, 0.0f,
+                         &corner_planes);
+  EXPECT_FALSE(boxed.doubtful()) << boxed.doubt;
+  EXPECT_GT(boxed.translation_constraint, 0.3);
+  // A smooth tunnel along z, 400 x 250 cm, 40 m long, matched against itself slid by 20 cm along
+  // it: every pair fits, but nothing pinned the slide. Only the constraint test can tell.
+  std::vector<Eigen::Vector3f> tunnel;
+  for (float along = -2000.0f; along < 2000.0f; along += 5.0f) {
+    for (float u = 0.0f; u < 250.0f; u += 5.0f) {
+      tunnel.emplace_back(-200.0f, u - 125.0f, along);
+      tunnel.emplace_back(200.0f, u - 125.0f, along);
+    }
+    for (float u = 0.0f; u < 400.0f; u += 5.0f) {
+      tunnel.emplace_back(u - 200.0f, -125.0f, along);
+      tunnel.emplace_back(u - 200.0f, 125.0f, along);
+    }
+  }
+  const auto prepared = cpu.prepare(tunnel, KdTreeSettings{});
+  const SurfaceNormals tunnel_planes(tunnel, 50.0f);
+  const WorldModel model{prepared.get(), Pose::Identity()};
+  const RegistrationHealth slid = judge_registration(cpu, *prepared, shifted(0, 0, 20), Pose::Identity(),
+                                                     {&model, 1}, icp, settings, 0.0f, &tunnel_planes);
+  ASSERT_TRUE(slid.doubtful());
+  EXPECT_NE(slid.doubt.find("degenerate"), std::string::npos) << slid.doubt;
+  EXPECT_GT(slid.paired_fraction, 0.95);  // what the other tests see: a perfect fit
+  EXPECT_LT(slid.translation_constraint, settings.min_translation_constraint);
+  EXPECT_NEAR(std::abs(slid.weakest_direction.z()), 1.0, 1e-3);
+  // Without the planes the constraint is not measured, and the slide passes.
+  const RegistrationHealth unmeasured =
+      judge_registration(cpu, *prepared, shifted(0, 0, 20), Pose::Identity(), {&model, 1}, icp, settings);
+  EXPECT_FALSE(unmeasured.doubtful()) << unmeasured.doubt;
+  EXPECT_LT(unmeasured.translation_constraint, 0.0);
+}
+
 TEST_F(Health, SurfacesThatSitApartAreDoubtful) {
   // Stuck 30 cm short in x and y: the two walls' counterparts lie beyond the bound but within 4x it;
   // the floor (z = 0) slides onto itself, and near the corner some wall points find the floor.

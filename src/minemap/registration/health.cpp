@@ -9,7 +9,7 @@ namespace minemap {
 
 void HealthSettings::validate() const {
   if (!(wide_factor >= 1.0f) || !std::isfinite(wide_factor)) throw std::invalid_argument("health: wide_factor must be >= 1");
-  for (const double f : {min_paired_fraction, max_beyond_bound_fraction, max_edge_fraction}) {
+  for (const double f : {min_paired_fraction, max_beyond_bound_fraction, max_edge_fraction, min_translation_constraint}) {
     if (!(f >= 0.0 && f <= 1.0)) throw std::invalid_argument("health: fractions must lie in [0, 1]");
   }
   if (!(max_reach > 0.0) || std::isnan(max_reach)) throw std::invalid_argument("health: max_reach must be > 0");
@@ -18,7 +18,8 @@ void HealthSettings::validate() const {
 
 RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
                                       const Pose& start, std::span<const WorldModel> models, const IcpSettings& icp,
-                                      const HealthSettings& settings, float reach_bound_cm) {
+                                      const HealthSettings& settings, float reach_bound_cm,
+                                      const SurfaceNormals* data_planes) {
   RegistrationHealth health;
   if (!settings.enabled || models.empty()) return health;
   health.judged = true;
@@ -64,6 +65,17 @@ RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedClo
     moved2 += (rotation_minus_identity * points[k].cast<double>() + translation).squaredNorm();
   }
   health.moved_cm = paired ? std::sqrt(moved2 / double(paired)) : 0.0;
+  if (data_planes != nullptr) {
+    std::vector<Eigen::Vector3f> paired_points;
+    paired_points.reserve(paired);
+    for (std::size_t k = 0; k < nearest.size() && k < points.size(); ++k) {
+      if (nearest[k].squared_distance_cm2 >= 0.0f && double(nearest[k].squared_distance_cm2) <= bound2) {
+        paired_points.push_back(points[k]);
+      }
+    }
+    const Matrix6d information = point_to_plane_information(paired_points, *data_planes);
+    health.translation_constraint = translation_constraint_ratio(information, &health.weakest_direction);
+  }
   char text[240];
   const float reach = reach_bound_cm > 0.0f ? reach_bound_cm : bound;
   if (health.moved_cm > settings.max_reach * reach) {
@@ -88,6 +100,14 @@ RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedClo
                   "%.0f%% of its pairs lie in the outer half of the %g cm pair bound (more than %.0f%%): not settled "
                   "onto the surfaces",
                   100.0 * health.edge_fraction, double(bound), 100.0 * settings.max_edge_fraction);
+    health.doubt = text;
+  } else if (health.translation_constraint >= 0.0 &&
+             health.translation_constraint < settings.min_translation_constraint) {
+    const Eigen::Vector3d& d = health.weakest_direction;
+    std::snprintf(text, sizeof text,
+                  "degenerate: its surfaces pin the motion along (%.2f, %.2f, %.2f) in the scan's frame %.4f times as "
+                  "well as the best direction (less than %g): it may have slid along it (a smooth tunnel)",
+                  d.x(), d.y(), d.z(), health.translation_constraint, settings.min_translation_constraint);
     health.doubt = text;
   }
   return health;

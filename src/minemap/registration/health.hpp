@@ -14,6 +14,10 @@
 //    the bound. ICP finds what lies within its bound's reach; a scan moved much farther started out
 //    of reach, and a bound wide enough to let it (metres) also pairs a street's ground with any
 //    shifted copy of itself: the figures above then look fine while the pose is metres off.
+//  * constraint (when the data's planes are given): of the point-to-plane information of the pairs
+//    (registration/match_information.hpp), the weakest translation over the strongest. Near zero,
+//    the surfaces cannot fix one direction: in a smooth tunnel a match may slide along it, and the
+//    figures above cannot tell, since the slid surfaces coincide.
 // The thresholds are in HealthSettings; docs/benchmarks.md has the figures they come from
 // (simulated surveys, the real LiDAR in ../shared/data, right and deliberately wrong starts).
 //
@@ -24,6 +28,7 @@
 #include "minemap/backend/compute_backend.hpp"
 #include "minemap/core/pose.hpp"
 #include "minemap/registration/icp.hpp"
+#include "minemap/registration/match_information.hpp"
 
 namespace minemap {
 
@@ -40,6 +45,9 @@ struct HealthSettings {
   /// for two simulated scans 8 m apart, within 0.3 cm of the truth).
   double max_edge_fraction = 0.5;
   double max_reach = 1.5;                   ///< data points moved farther (RMS) than this many bounds: started out of reach
+  /// The weakest translation the pairs' planes pin, over the strongest, below this: degenerate (free
+  /// to slide along one direction).
+  double min_translation_constraint = 0.002;
   /// Throws std::invalid_argument naming the bad setting.
   void validate() const;
 };
@@ -55,6 +63,9 @@ struct RegistrationHealth {
   double correction_cm = 0.0;      ///< how far the match moved the scan from where it started...
   double correction_deg = 0.0;     ///< ...and how far it turned it
   double moved_cm = 0.0;           ///< RMS distance the paired data points moved, start to end
+  /// Weakest over strongest translation information of the pairs (< 0: not measured, no planes given).
+  double translation_constraint = -1.0;
+  Eigen::Vector3d weakest_direction = Eigen::Vector3d::Zero();  ///< in the data frame (unit; 0: not measured)
   float pair_bound_cm = 0.0f;      ///< the bound it was judged at (the match's own)
   float retry_bound_cm = 0.0f;     ///< > 0: trusted after a retry that started at this wider bound
   std::string doubt;               ///< empty: trusted; otherwise which test failed, with its figures
@@ -67,9 +78,11 @@ struct RegistrationHealth {
 
 /// Judges `data` at `world_from_data` (moved there from `start`) against `models`, at the pair
 /// bound `icp.max_pair_dist_cm` (exact search); the reach test uses `reach_bound_cm` when > 0 (a
-/// match that began at a wider bound, coarse to fine).
+/// match that began at a wider bound, coarse to fine). `data_planes`: the data scan's planes in its
+/// own frame, for the constraint test (nullptr: not measured).
 RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
                                       const Pose& start, std::span<const WorldModel> models, const IcpSettings& icp,
-                                      const HealthSettings& settings, float reach_bound_cm = 0.0f);
+                                      const HealthSettings& settings, float reach_bound_cm = 0.0f,
+                                      const SurfaceNormals* data_planes = nullptr);
 
 }  // namespace minemap

@@ -146,6 +146,7 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
                                 {"moved", h.moved_cm * unit_per_cm},
                                 {"pair_bound", h.pair_bound_cm * unit_per_cm},
                                 {"retry_bound", h.retry_bound_cm * unit_per_cm},
+                                {"translation_constraint", h.translation_constraint},
                                 {"judged_after_loop_closure", h.after_loop_closure}};
     }
   }

@@ -22,12 +22,18 @@ Pose perturbed(const Pose& pose, const Vector6d& dx) {
   return pose * step;
 }
 
+/// The information an edge carries: its own, or the settings' sigmas; times its weight.
+Matrix6d information_of(const PoseGraphEdge& e, const Vector6d& isotropic) {
+  const Matrix6d information = e.information.isZero() ? Matrix6d(isotropic.asDiagonal()) : e.information;
+  return e.weight * information;
+}
+
 /// Sum of the squared, weighted residuals.
-double cost_of(const std::vector<Pose>& poses, std::span<const PoseGraphEdge> edges, const Vector6d& information) {
+double cost_of(const std::vector<Pose>& poses, std::span<const PoseGraphEdge> edges, const Vector6d& isotropic) {
   double cost = 0.0;
   for (const PoseGraphEdge& e : edges) {
     const Vector6d r = pose_graph_residual(poses[e.from], poses[e.to], e.from_to);
-    cost += e.weight * r.cwiseProduct(information).dot(r);
+    cost += r.dot(information_of(e, isotropic) * r);
   }
   return cost;
 }
@@ -47,6 +53,10 @@ PoseGraphResult optimise_pose_graph(std::vector<Pose> poses, std::span<const Pos
                                     const PoseGraphSettings& settings) {
   const std::size_t n = poses.size();
   for (const PoseGraphEdge& e : edges) {
+    if (!e.information.allFinite() || !(e.weight >= 0.0)) {
+      throw std::invalid_argument("pose graph: edge " + std::to_string(e.from) + " -> " + std::to_string(e.to) +
+                                  " has a weight or information that is not a finite number >= 0");
+    }
     if (e.from >= n || e.to >= n || e.from == e.to) {
       throw std::invalid_argument("pose graph: edge " + std::to_string(e.from) + " -> " + std::to_string(e.to) +
                                   " does not join two of the " + std::to_string(n) + " poses");
@@ -89,7 +99,7 @@ PoseGraphResult optimise_pose_graph(std::vector<Pose> poses, std::span<const Pos
                               pose_graph_residual(poses[e.from], perturbed(poses[e.to], -dx), e.from_to)) /
                              (2.0 * h);
       }
-      const Eigen::DiagonalMatrix<double, 6> w(e.weight * information);
+      const Matrix6d w = information_of(e, information);
       const std::size_t nodes[2] = {e.from, e.to};
       const Matrix6d* jacobians[2] = {&jacobian_from, &jacobian_to};
       for (int a = 0; a < 2; ++a) {

@@ -20,6 +20,10 @@ struct PoseGraphEdge {
   std::size_t to = 0;
   Pose from_to = Pose::Identity();
   double weight = 1.0;  ///< multiplies the edge's information (e.g. several for a trusted loop edge)
+  /// The edge's information over [translation cm, rotation rad] (in the `to` frame; e.g. from its
+  /// match's geometry, registration/match_information.hpp). Zero: the settings' sigmas, alike in
+  /// every direction.
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
 };
 
 struct PoseGraphSettings {

@@ -12,6 +12,7 @@
 
 #include "minemap/backend/cpu_backend.hpp"
 #include "minemap/filter/voxel_filter.hpp"
+#include "minemap/registration/match_information.hpp"
 
 namespace minemap {
 namespace {
@@ -24,6 +25,7 @@ struct ScanState {
   std::shared_ptr<const PreparedCloud> cloud;        ///< data: matched against others
   std::shared_ptr<const PreparedCloud> model_cloud;  ///< model: others are matched against it (may be `cloud`)
   std::shared_ptr<const PreparedCloud> probe;        ///< every health.probe_stride-th data point: what judging searches
+  std::optional<SurfaceNormals> planes;              ///< its model's planes, own frame (health, loop edges)
   Pose odometry = Pose::Identity();  ///< initial T_world_points
   Pose pose = Pose::Identity();      ///< current T_world_points
   Pose points_from_file = Pose::Identity();
@@ -161,13 +163,22 @@ class SurveyMatcher {
       state.model_cloud = has_model[i] ? std::move(model_clouds[next_model++]) : state.cloud;
       state.probe = has_probe[i] ? std::move(probe_clouds[next_probe++]) : state.cloud;
     }
+    if (settings_.health.enabled || (settings_.loops.enabled && settings_.loops.information_from_geometry)) {
+      tbb::parallel_for(std::size_t{0}, scans_.size(), [&](std::size_t i) {
+        states_[i].planes.emplace(states_[i].model_cloud->points(), settings_.plane_cell_cm);
+      });
+    }
     result_.times.tree_build_s += seconds_since(start);
+  }
+
+  const SurfaceNormals* planes_of(std::size_t i) const {
+    return states_[i].planes ? &*states_[i].planes : nullptr;
   }
 
   /// Judges scan i's match (from `start` to its current pose) against `models`.
   void judge(std::size_t i, const Pose& start, std::span<const WorldModel> models) {
     result_.scans[i].health = judge_registration(backend_, *states_[i].probe, states_[i].pose, start, models, icp_,
-                                                 settings_.health);
+                                                 settings_.health, 0.0f, planes_of(i));
   }
 
   void set_pose(std::size_t i, const Pose& world_from_points, const IcpResult& match) {
@@ -255,7 +266,8 @@ class SurveyMatcher {
       result_.step1_icp_iterations += fine.iterations();
       if (!fine.ok()) continue;
       RegistrationHealth health = judge_registration(backend_, *states_[i].probe, fine.world_from_data, start,
-                                                     wide_models, icp_, settings_.health, wide.max_pair_dist_cm);
+                                                     wide_models, icp_, settings_.health, wide.max_pair_dist_cm,
+                                                     planes_of(i));
       char bound[32];
       std::snprintf(bound, sizeof bound, "%g cm", double(wide.max_pair_dist_cm));
       if (health.doubtful()) {
@@ -403,11 +415,39 @@ class SurveyMatcher {
         continue;
       }
       const RegistrationHealth health = judge_registration(backend_, *states_[j].probe, fine.world_from_data, start,
-                                                           models, icp_, settings_.health, wide.max_pair_dist_cm);
+                                                           models, icp_, settings_.health, wide.max_pair_dist_cm,
+                                                           planes_of(j));
       if (!health.doubtful()) return fine.world_from_data;
       doubt = health.doubt;
     }
     return std::nullopt;
+  }
+
+  /// The information of the edge `from` -> `to` at the scans' current poses, from the geometry of
+  /// their pairs (registration/match_information.hpp): the probe points of `to` with a partner in
+  /// `from`'s model within the pair bound, on a plane of `to`'s own surface. Scaled so that its mean
+  /// translation information is the settings' (1 / sigma^2), with a floor of
+  /// loops.min_information_fraction of that in every direction: a match that could not see a
+  /// direction leaves it to the other edges instead of holding it at its guess.
+  Matrix6d edge_information(std::size_t from, std::size_t to, const SurfaceNormals& to_normals) {
+    const ModelPlacement placed{states_[from].model_cloud.get(), rigid_inverse(states_[from].pose) * states_[to].pose};
+    const std::vector<NearestPair> nearest = backend_.nearest(*states_[to].probe, {&placed, 1}, SearchMethod::kExact,
+                                                              PairingSettings{icp_.max_pair_dist_cm});
+    const std::span<const Eigen::Vector3f> points = states_[to].probe->points();
+    std::vector<Eigen::Vector3f> paired;
+    for (std::size_t k = 0; k < nearest.size(); ++k) {
+      if (nearest[k].squared_distance_cm2 >= 0.0f) paired.push_back(points[k]);
+    }
+    const PoseGraphSettings& graph = settings_.loops.graph;
+    const double t = 1.0 / (graph.translation_sigma_cm * graph.translation_sigma_cm);
+    const double r = 1.0 / (graph.rotation_sigma_rad * graph.rotation_sigma_rad);
+    Eigen::Matrix<double, 6, 1> floor;
+    floor << t, t, t, r, r, r;
+    floor *= settings_.loops.min_information_fraction;
+    const Matrix6d geometry = point_to_plane_information(paired, to_normals);
+    const double translation_trace = geometry.topLeftCorner<3, 3>().trace();
+    if (!(translation_trace > 0.0)) return Matrix6d::Zero();  // no plane seen: the settings' sigmas
+    return geometry * (3.0 * t / translation_trace) + Matrix6d(floor.asDiagonal());
   }
 
   /// Loops (MappingSettings::loops): candidates by position, each matched, then one relaxation of
@@ -419,10 +459,15 @@ class SurveyMatcher {
     std::vector<PoseGraphEdge> edges;
     std::vector<Pose> poses(n);
     for (std::size_t k = 0; k < n; ++k) poses[k] = states_[k].pose;
+    // The information of an edge comes from the planes of the scan it ends at.
+    const auto planes = [&](std::size_t k) {
+      return settings_.loops.information_from_geometry ? planes_of(k) : nullptr;
+    };
     for (std::size_t k = 1; k < n; ++k) {
       // A scan left at odometry constrains its neighbours only weakly.
       const bool matched = result_.scans[k].registered && result_.scans[k - 1].registered;
       edges.push_back({k - 1, k, rigid_inverse(poses[k - 1]) * poses[k], matched ? 1.0 : 0.01});
+      if (matched && planes(k)) edges.back().information = edge_information(k - 1, k, *planes(k));
     }
     const std::size_t chain_edges = edges.size();
     // For each scan, the nearest scan at least `gap` earlier, when near enough. Scans in a row that
@@ -434,12 +479,16 @@ class SurveyMatcher {
       std::size_t from, to;
       double distance_cm;
     };
+    std::vector<double> driven_cm(n, 0.0);  // along the scan positions, from scan 0
+    for (std::size_t k = 1; k < n; ++k) {
+      driven_cm[k] = driven_cm[k - 1] + (poses[k].block<3, 1>(0, 3) - poses[k - 1].block<3, 1>(0, 3)).norm();
+    }
     std::vector<std::vector<Candidate>> returns;
     for (std::size_t j = gap; j < n; ++j) {
       if (!result_.scans[j].registered) continue;
       Candidate best{n, j, settings_.loops.max_distance_cm};
       for (std::size_t i = 0; i + gap <= j; ++i) {
-        if (!result_.scans[i].registered) continue;
+        if (!result_.scans[i].registered || driven_cm[j] - driven_cm[i] < settings_.loops.min_path_cm) continue;
         const double d = (poses[i].block<3, 1>(0, 3) - poses[j].block<3, 1>(0, 3)).norm();
         if (d < best.distance_cm) best = {i, j, d};
       }
@@ -462,6 +511,13 @@ class SurveyMatcher {
           loop.gap_before_cm = translation_norm(moved);
           loop.gap_before_deg = rotation_angle_deg(moved);
           edges.push_back({loop.from, loop.to, rigid_inverse(poses[loop.from]) * *matched, 1.0});
+          if (planes(loop.to)) {
+            // At the pose the loop match found, not where the chain left the scan.
+            const Pose chain_pose = states_[loop.to].pose;
+            states_[loop.to].pose = *matched;
+            edges.back().information = edge_information(loop.from, loop.to, *planes(loop.to));
+            states_[loop.to].pose = chain_pose;
+          }
         }
         result_.loops.push_back(loop);
         if (loop.closed) break;
@@ -486,7 +542,7 @@ class SurveyMatcher {
       const auto map = build_metascan(k, pose, pose, double(icp_.max_pair_dist_cm), /*whole_map=*/true);
       const std::vector<WorldModel> models{{map.get(), pose}};
       RegistrationHealth health = judge_registration(backend_, *states_[k].probe, pose, pose, models, icp_,
-                                                     settings_.health);
+                                                     settings_.health, 0.0f, planes_of(k));
       health.correction_cm = old.correction_cm;
       health.correction_deg = old.correction_deg;
       health.moved_cm = old.moved_cm;
@@ -608,6 +664,9 @@ void MappingSettings::validate() const {
   if (model_slice_stride < 1) throw std::invalid_argument("model slice stride must be >= 1");
   if (min_overlap_pairs < 0) throw std::invalid_argument("the overlap threshold must be >= 0 pairs");
   if (max_relaxation_matches_per_scan < 0) throw std::invalid_argument("the relaxation cap must be >= 0");
+  if (!(plane_cell_cm > 0.0f) || !std::isfinite(plane_cell_cm)) {
+    throw std::invalid_argument("the planes' cell must be a finite length > 0 cm");
+  }
   if (max_relaxation_neighbours < 0) throw std::invalid_argument("the relaxation's neighbour cap must be >= 0");
   for (const float factor : retry_bound_factors) {
     if (!(factor > 1.0f) || !std::isfinite(factor)) throw std::invalid_argument("retry bound factors must be > 1");
@@ -631,11 +690,17 @@ void LoopClosureSettings::validate() const {
   if (!(max_distance_cm > 0.0) || !std::isfinite(max_distance_cm)) {
     throw std::invalid_argument("the loop candidates' distance must be a finite length > 0 cm");
   }
+  if (!(min_path_cm >= 0.0) || !std::isfinite(min_path_cm)) {
+    throw std::invalid_argument("a loop's least drive must be a finite length >= 0 cm");
+  }
   for (const float factor : bound_factors) {
     if (!(factor >= 1.0f) || !std::isfinite(factor)) throw std::invalid_argument("loop bound factors must be >= 1");
   }
   if (!(graph.translation_sigma_cm > 0.0) || !(graph.rotation_sigma_rad > 0.0) || graph.max_iterations < 1) {
     throw std::invalid_argument("the pose graph needs sigmas > 0 and at least one iteration");
+  }
+  if (!(min_information_fraction > 0.0) || !(min_information_fraction <= 1.0)) {
+    throw std::invalid_argument("the information floor must be in (0, 1]");
   }
 }
 

@@ -56,10 +56,20 @@ MatchingMode parse_matching_mode(const std::string& text);  ///< "pairwise", "in
 struct LoopClosureSettings {
   bool enabled = true;
   int min_scan_gap = 12;             ///< a loop joins scans at least this many apart (48 m at 4 m steps)
-  double max_distance_cm = 1000.0;   ///< candidates: scans whose positions are this close
+  double max_distance_cm = 1000.0;   ///< candidates: scans whose positions are this close...
+  /// ...with at least this much drive between them (along the scan positions): in a survey of
+  /// scans half a metre apart, 12 scans back is still the same stretch of tunnel, not a loop.
+  double min_path_cm = 4000.0;
   /// The pair bounds a loop match tries, coarse to fine, until one is trusted: what has drifted
   /// further than this over the loop is not closed (and said so).
   std::vector<float> bound_factors = {1.0f, 4.0f, 16.0f};
+  /// Each edge's information from its match's geometry (point-to-plane, on the planes of the scan it
+  /// ends at: MappingSettings::plane_cell_cm), as LUM takes its covariances from the point pairs: the
+  /// relaxation then bends a step along what its match could not see (a slide along a tunnel) rather
+  /// than every step alike. Off: every edge has graph's sigmas, alike in every direction.
+  bool information_from_geometry = true;
+  /// Every direction keeps at least this fraction of graph's information, however blind its match.
+  double min_information_fraction = 0.01;
   PoseGraphSettings graph;
   void validate() const;
 };
@@ -113,6 +123,9 @@ struct MappingSettings {
   int max_relaxation_matches_per_scan = 8;
   /// Every match is judged (registration/health.hpp); a doubtful one is named in ScanOutcome::health.
   HealthSettings health;
+  /// Each scan's surfaces are cut into cubes of this size, and a plane fitted in each (a normal):
+  /// what the health's constraint test and the loop edges' information measure with.
+  float plane_cell_cm = 50.0f;
   /// Pairwise and incremental matching: a doubtful match is tried again from the same start at these
   /// multiples of the pair bound, coarse to fine, until one is trusted (1 m, then 4 m for 25 cm):
   /// a start out of the 25 cm bound's reach (LiDAR without odometry) then still ends right, and
