@@ -7,11 +7,15 @@
 #include <cmath>
 #include <cstdio>
 #include <numbers>
+#include <random>
+#include <algorithm>
 #include <sstream>
 
 #include "io_test_helpers.hpp"
 #include "minemap/io/formats.hpp"
+#include "minemap/io/slice_detection.hpp"
 #include "minemap/io/text_reader.hpp"
+#include "minemap/sim/mine_simulator.hpp"
 
 namespace minemap {
 namespace {
@@ -210,6 +214,44 @@ TEST(UosPoints, UnmarkedFilesSplitIntoFixedSlicesOnRequest) {
   // Markers win over points_per_slice; points before the first marker form slice 0.
   write_text(path, "1 1 1\n# slice 0\n2 2 2\n3 3 3\n#slice 1\n4 4 4\n# slice one\n5 5 5\n");
   EXPECT_EQ(io::read_uos_points(path, settings).slice_offsets, (std::vector<std::uint32_t>{0, 1, 3, 5}));
+}
+
+// A scan of the paper's scanner written without markers: its slices are found again from the order
+// of its points, exactly; a cloud that is not in scanner order (shuffled, or moved far from its
+// scanner) gets none.
+TEST(UosPoints, UnmarkedScannerOrderedFilesGetTheirSlicesBack) {
+  sim::SimulationSettings sim_settings;
+  sim_settings.mine.scans = 2;
+  const sim::SimulatedSurvey survey = sim::simulate_mine_survey(sim_settings);
+  const Scan& scan = survey.scans[1];
+  ASSERT_TRUE(scan.has_slices());
+  std::vector<std::size_t> expected;  // the first point of every slice that has points
+  for (std::size_t s = 0; s < scan.num_slices(); ++s) {
+    if (scan.slice_offsets[s] < scan.slice_offsets[s + 1]) expected.push_back(scan.slice_offsets[s]);
+  }
+  EXPECT_EQ(io::detect_slice_starts(scan.points_cm), expected);
+
+  TempDir dir;
+  Scan unmarked = scan;
+  unmarked.slice_offsets.clear();
+  io::write_uos_points(dir / "scan001.3d", unmarked);
+  io::ReadReport report;
+  io::ReadSettings settings;
+  settings.report = &report;
+  const Scan read = io::read_uos_points(dir / "scan001.3d", settings);
+  ASSERT_TRUE(read.has_slices());
+  EXPECT_EQ(read.num_slices(), expected.size());
+  EXPECT_EQ(report.slices_detected, expected.size());
+  settings.detect_slices = false;
+  EXPECT_FALSE(io::read_uos_points(dir / "scan001.3d", settings).has_slices());
+
+  std::vector<Eigen::Vector3f> shuffled = scan.points_cm;
+  std::mt19937 random(3);
+  std::shuffle(shuffled.begin(), shuffled.end(), random);
+  EXPECT_TRUE(io::detect_slice_starts(shuffled).empty());
+  std::vector<Eigen::Vector3f> far = scan.points_cm;  // in a world frame, 500 m from the scanner
+  for (auto& p : far) p += Eigen::Vector3f(50000.0f, 0.0f, 20000.0f);
+  EXPECT_TRUE(io::detect_slice_starts(far).empty());
 }
 
 TEST(UosPoints, RightHandedMetresBecome3dtkCentimetres) {

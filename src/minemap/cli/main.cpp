@@ -75,6 +75,7 @@ struct MapOptions {
   bool plain_icp = false;
   std::string unit;  // empty: the format's default
   std::uint32_t points_per_slice = 0;
+  bool no_slice_detection = false;
   fs::path initial_poses;
   fs::path reference_poses;
   bool right_handed_to_3dtk = false;
@@ -171,6 +172,7 @@ int run_map(const MapOptions& options, minemap::MappingSettings settings, const 
   io::SurveyReadSettings read;
   if (!options.unit.empty()) read.read.unit = parse_length_unit(options.unit);
   read.read.points_per_slice = options.points_per_slice;
+  read.read.detect_slices = !options.no_slice_detection;
   read.read.right_handed_to_3dtk = options.right_handed_to_3dtk;
   if (!options.initial_poses.empty()) read.initial_poses = options.initial_poses;
   if (!options.reference_poses.empty()) read.reference_poses = options.reference_poses;
@@ -423,7 +425,10 @@ int main(int argc, char** argv) {
                       "Relaxation: match a scan against at most this many overlapping scans, nearest first "
                       "(0 = all, as the paper)")
       ->capture_default_str();
-  map_cmd->add_option("--points-per-slice", map.points_per_slice, "uos files without slice markers: points per slice");
+  map_cmd->add_option("--points-per-slice", map.points_per_slice,
+                      "uos files without slice markers: points per slice (default: found from the scanner order)");
+  map_cmd->add_flag("--no-slice-detection", map.no_slice_detection,
+                    "uos files without slice markers: do not look for slices in the order of the points");
   map_cmd->add_option("--initial-poses", map.initial_poses,
                       "Initial poses (TUM, KITTI, 4x4 or graph file; commas allowed), one per scan in the order printed");
   map_cmd->add_option("--reference-poses", map.reference_poses,

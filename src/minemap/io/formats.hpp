@@ -32,6 +32,7 @@ namespace fs = std::filesystem;
 /// What a reader dropped without failing (ReadSettings::report).
 struct ReadReport {
   std::uint64_t nan_points_dropped = 0;  ///< points with a NaN x, y or z (no-return markers)
+  std::uint64_t slices_detected = 0;     ///< slices found in scanner order (ReadSettings::detect_slices)
 };
 
 /// How to interpret a file's coordinates.
@@ -42,6 +43,9 @@ struct ReadSettings {
   bool right_handed_to_3dtk = false;
   /// uos files without "# slice" markers: split into slices of this many points (0 = no slices).
   std::uint32_t points_per_slice = 0;
+  /// uos files without markers (and no points_per_slice): find the slices from the order of the
+  /// points where that is safe (io/slice_detection.hpp), so the paper's slice filter applies.
+  bool detect_slices = true;
   /// Refuse files that claim more points than this (absurd headers must not allocate):
   /// InputProblem::kCountBeyondLimits. A count within it that the file is too short to hold is
   /// kTruncated; either way it is checked against the file size before anything is allocated.

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "minemap/io/slice_detection.hpp"
 #include "minemap/io/text_reader.hpp"
 
 namespace minemap::io::detail {
@@ -14,6 +15,7 @@ ScanBuilder::ScanBuilder(const std::filesystem::path& path, const ReadSettings& 
       scale_to_cm_(centimetres_per(unit_)),
       right_handed_to_3dtk_(settings.right_handed_to_3dtk),
       points_per_slice_(settings.points_per_slice),
+      detect_slices_(settings.detect_slices),
       max_points_(settings.max_points),
       report_(settings.report) {}
 
@@ -63,6 +65,9 @@ Scan ScanBuilder::finish(bool split_unmarked) {
   std::vector<std::size_t> starts = std::move(slice_starts_);
   if (starts.empty() && split_unmarked && points_per_slice_ > 0) {
     for (std::size_t start = 0; start < count; start += points_per_slice_) starts.push_back(start);
+  } else if (starts.empty() && split_unmarked && detect_slices_) {
+    starts = detect_slice_starts(points_cm_);
+    if (report_ != nullptr) report_->slices_detected += starts.size();
   }
   if (!starts.empty()) {
     if (count > std::numeric_limits<std::uint32_t>::max()) {

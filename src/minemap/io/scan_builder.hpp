@@ -61,7 +61,8 @@ class ScanBuilder {
   void begin_slice() { slice_starts_.push_back(points_cm_.size()); }
 
   /// The scan, named after the file's stem. Slices come from begin_slice() markers, else from
-  /// ReadSettings::points_per_slice when `split_unmarked` is set, else there are none.
+  /// ReadSettings::points_per_slice when `split_unmarked` is set, else from the points' order
+  /// (ReadSettings::detect_slices, io/slice_detection.hpp), else there are none.
   Scan finish(bool split_unmarked);
 
   /// Message and kind for a failed add(), for the caller to throw at its location.
@@ -76,6 +77,7 @@ class ScanBuilder {
   double scale_to_cm_;
   bool right_handed_to_3dtk_;
   std::uint32_t points_per_slice_;
+  bool detect_slices_;
   std::uint64_t max_points_;
   ReadReport* report_;
   std::uint64_t nan_dropped_ = 0;

@@ -208,6 +208,7 @@ class ParallelReads {
     }
     return std::move(scans_[k]);
   }
+  std::uint64_t slices_detected(std::size_t k) const { return reports_[k].slices_detected; }
 
  private:
   std::vector<Scan> scans_;
@@ -223,9 +224,11 @@ void read_uos_layout(const fs::path& dir, const FolderContent& content, const Su
   std::vector<fs::path> paths;
   for (const auto& entry : content.uos) paths.push_back(entry.second);
   ParallelReads reads(paths, settings.read, [](const fs::path& p, const ReadSettings& s) { return read_uos_points(p, s); });
+  std::size_t detected = 0;
   for (std::size_t k = 0; k < paths.size(); ++k) {
     const fs::path& path = paths[k];
     Scan scan = reads.take(k, dropped);
+    detected += reads.slices_detected(k) > 0 ? 1 : 0;
     if (need_pose_files) {
       const fs::path pose_path = fs::path(path).replace_extension(".pose");
       if (!fs::exists(pose_path)) {
@@ -237,6 +240,13 @@ void read_uos_layout(const fs::path& dir, const FolderContent& content, const Su
     }
     truth_files += fs::exists(dir / "truth" / (scan.name + ".pose")) ? 1 : 0;
     survey.scans.push_back(std::move(scan));
+  }
+  if (detected > 0) {
+    // Not a problem; said because it changes what the slice filter does with these files.
+    survey.warnings.push_back(std::to_string(detected) + " of " + std::to_string(paths.size()) +
+                              " uos files have no '# slice' markers: their slices were found from the scanner "
+                              "order of the points (--points-per-slice N sets them, --no-slice-detection leaves "
+                              "them without)");
   }
   if (truth_files == 0) return;
   std::vector<Pose> truth;

@@ -234,10 +234,42 @@ class SurveyMatcher {
   /// The models scan i is matched against, for a given pair bound (a metascan is cropped by it).
   using ModelsForBound = std::function<std::vector<WorldModel>(float bound_cm)>;
 
+  /// One match of scan i that starts wide: ICP at `bound_cm` from `start` (no refinement), then the
+  /// usual phases from where that ended, judged with the reach of the wide bound. Both runs'
+  /// iterations are added to `iterations`.
+  struct WideMatch {
+    std::optional<IcpResult> fine;  ///< empty: an ICP run failed (`failure` says how)
+    RegistrationHealth health;
+    std::string failure;
+  };
+  WideMatch match_from_wide_bound(std::size_t i, const Pose& start, std::span<const WorldModel> models, float bound_cm,
+                                  int& iterations) {
+    IcpSettings wide = icp_;
+    wide.max_pair_dist_cm = bound_cm;
+    wide.refine_pair_dist_fraction = 0.0f;
+    WideMatch match;
+    const IcpResult coarse = register_icp(backend_, *states_[i].cloud, start, models, wide);
+    iterations += coarse.iterations();
+    if (!coarse.ok()) {
+      match.failure = to_string(coarse.stop);
+      return match;
+    }
+    IcpResult fine = register_icp(backend_, *states_[i].cloud, coarse.world_from_data, models, icp_);
+    iterations += fine.iterations();
+    if (!fine.ok()) {
+      match.failure = to_string(fine.stop);
+      return match;
+    }
+    match.health = judge_registration(backend_, *states_[i].probe, fine.world_from_data, start, models, icp_,
+                                      settings_.health, bound_cm, planes_of(i));
+    match.fine = std::move(fine);
+    return match;
+  }
+
   /// Registers scan i from `start` and judges the match. A doubtful one is tried again from the same
-  /// start at each wider bound of settings.retry_bound_factors, coarse to fine (ICP at the wide
-  /// bound, then the usual phases from where it ended), until one is trusted; a trusted retry
-  /// replaces the first match, otherwise the first match and its doubt stay.
+  /// start at each wider bound of settings.retry_bound_factors, coarse to fine (match_from_wide_bound),
+  /// until one is trusted; a trusted retry replaces the first match, otherwise the first match and
+  /// its doubt stay.
   void register_scan(std::size_t i, const Pose& start, const ModelsForBound& models_for) {
     const std::vector<WorldModel> models = models_for(icp_.max_pair_dist_cm);
     const IcpResult match = register_icp(backend_, *states_[i].cloud, start, models, icp_);
@@ -254,29 +286,20 @@ class SurveyMatcher {
     std::string tried;
     for (const float factor : settings_.retry_bound_factors) {
       if (!result_.scans[i].health.doubtful()) return;
-      IcpSettings wide = icp_;
-      wide.max_pair_dist_cm = factor * icp_.max_pair_dist_cm;
-      if (wide.max_pair_dist_cm > settings_.max_retry_bound_cm) break;
-      wide.refine_pair_dist_fraction = 0.0f;
-      const std::vector<WorldModel> wide_models = models_for(wide.max_pair_dist_cm);
-      const IcpResult coarse = register_icp(backend_, *states_[i].cloud, start, wide_models, wide);
-      result_.step1_icp_iterations += coarse.iterations();
-      if (!coarse.ok()) continue;
-      const IcpResult fine = register_icp(backend_, *states_[i].cloud, coarse.world_from_data, wide_models, icp_);
-      result_.step1_icp_iterations += fine.iterations();
-      if (!fine.ok()) continue;
-      RegistrationHealth health = judge_registration(backend_, *states_[i].probe, fine.world_from_data, start,
-                                                     wide_models, icp_, settings_.health, wide.max_pair_dist_cm,
-                                                     planes_of(i));
-      char bound[32];
-      std::snprintf(bound, sizeof bound, "%g cm", double(wide.max_pair_dist_cm));
-      if (health.doubtful()) {
-        tried += (tried.empty() ? "" : ", ") + std::string(bound);
+      const float bound = factor * icp_.max_pair_dist_cm;
+      if (bound > settings_.max_retry_bound_cm) break;
+      const std::vector<WorldModel> wide_models = models_for(bound);
+      WideMatch retry = match_from_wide_bound(i, start, wide_models, bound, result_.step1_icp_iterations);
+      if (!retry.fine) continue;
+      if (retry.health.doubtful()) {
+        char text[32];
+        std::snprintf(text, sizeof text, "%g cm", double(bound));
+        tried += (tried.empty() ? "" : ", ") + std::string(text);
         continue;
       }
-      set_pose(i, fine.world_from_data, fine);
-      health.retry_bound_cm = wide.max_pair_dist_cm;
-      result_.scans[i].health = health;
+      set_pose(i, retry.fine->world_from_data, *retry.fine);
+      retry.health.retry_bound_cm = bound;
+      result_.scans[i].health = retry.health;
       return;
     }
     if (!tried.empty()) result_.scans[i].health.doubt += " (tried again from " + tried + ": still doubtful)";
@@ -399,26 +422,17 @@ class SurveyMatcher {
   std::optional<Pose> loop_match(std::size_t i, std::size_t j, std::string& doubt) {
     const std::vector<WorldModel> models = models_of({i});
     const Pose start = states_[j].pose;
+    int iterations = 0;  // not Table I's: a loop match is neither step 1 nor step 3
     for (const float factor : settings_.loops.bound_factors) {
-      IcpSettings wide = icp_;
-      wide.max_pair_dist_cm = factor * icp_.max_pair_dist_cm;
-      if (wide.max_pair_dist_cm > settings_.max_retry_bound_cm) break;
-      wide.refine_pair_dist_fraction = 0.0f;
-      const IcpResult coarse = register_icp(backend_, *states_[j].cloud, start, models, wide);
-      if (!coarse.ok()) {
-        doubt = to_string(coarse.stop);
+      const float bound = factor * icp_.max_pair_dist_cm;
+      if (bound > settings_.max_retry_bound_cm) break;
+      const WideMatch match = match_from_wide_bound(j, start, models, bound, iterations);
+      if (!match.fine) {
+        doubt = match.failure;
         continue;
       }
-      const IcpResult fine = register_icp(backend_, *states_[j].cloud, coarse.world_from_data, models, icp_);
-      if (!fine.ok()) {
-        doubt = to_string(fine.stop);
-        continue;
-      }
-      const RegistrationHealth health = judge_registration(backend_, *states_[j].probe, fine.world_from_data, start,
-                                                           models, icp_, settings_.health, wide.max_pair_dist_cm,
-                                                           planes_of(j));
-      if (!health.doubtful()) return fine.world_from_data;
-      doubt = health.doubt;
+      if (!match.health.doubtful()) return match.fine->world_from_data;
+      doubt = match.health.doubt;
     }
     return std::nullopt;
   }
