@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <fstream>
+#include <sstream>
 #include <nlohmann/json.hpp>
 
 #include "test_support.hpp"
@@ -63,6 +64,35 @@ TEST(Cli, ALoopSurveyIsClosedAndReported) {
             0)
       << output;
   EXPECT_TRUE(lines_containing(output, "loop closed:").empty()) << output;
+}
+
+// uos files without "# slice" markers (as other tools write them): the slices are found from the
+// scanner order, the run says so, and the slice filter applies as it does with markers.
+TEST(Cli, UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder) {
+  TempDir dir;
+  std::string output;
+  const auto survey = dir / "survey";
+  ASSERT_EQ(run_cli("simulate --out " + survey.string() + " --scans 3", &output), 0) << output;
+  for (const char* name : {"scan000.3d", "scan001.3d", "scan002.3d"}) {
+    std::istringstream in(test::read_text(survey / name));
+    std::string line, kept;
+    while (std::getline(in, line)) {
+      if (line.rfind("# slice", 0) != 0) kept += line + "\n";
+    }
+    test::write_text(survey / name, kept);
+  }
+  const std::string map = "map " + survey.string() + " --backend cpu --preset simultaneous --out ";
+  ASSERT_EQ(run_cli(map + (dir / "found").string(), &output), 0) << output;
+  EXPECT_EQ(lines_containing(output, "3 of 3 uos files have no '# slice' markers").size(), 1u) << output;
+  std::ifstream in(dir / "found" / "report.json");
+  const auto report = nlohmann::json::parse(in);
+  EXPECT_TRUE(report["notes"].empty()) << report["notes"];  // no "slice filter skipped"
+  ASSERT_EQ(report["timings_s"]["per_scan"].size(), 3u);
+  EXPECT_GT(report["timings_s"]["per_scan"][2].get<double>(), 0.0);
+  ASSERT_EQ(run_cli(map + (dir / "without").string() + " --no-slice-detection", &output), 0) << output;
+  EXPECT_TRUE(lines_containing(output, "uos files have no '# slice' markers").empty()) << output;
+  std::ifstream without(dir / "without" / "report.json");
+  EXPECT_FALSE(nlohmann::json::parse(without)["notes"].empty());
 }
 
 TEST(Cli, BadInputNamesFileAndLineAndLeavesTheOutputFolderAsItWas) {
