@@ -45,6 +45,13 @@ class SurveyMatcher {
         icp_(settings.icp) {
     // A pair of scans that passes the overlap test must also be registrable.
     icp_.termination.min_pairs = std::min(icp_.termination.min_pairs, settings.min_overlap_pairs);
+    relaxation_icp_ = icp_;
+    if (settings.relaxation_min_step_cm > 0.0) {
+      relaxation_icp_.termination.min_translation_step_cm = settings.relaxation_min_step_cm;
+    }
+    if (settings.relaxation_min_step_deg > 0.0) {
+      relaxation_icp_.termination.min_rotation_step_deg = settings.relaxation_min_step_deg;
+    }
   }
 
   MappingResult run() {
@@ -395,7 +402,7 @@ class SurveyMatcher {
       const Pose before = states_[current].pose;
       const auto metascan = build_union(current, neighbours, before, before, grow_cm);
       const std::vector<WorldModel> models{{metascan.get(), before}};
-      const IcpResult match = register_icp(backend_, *states_[current].cloud, before, models, icp_);
+      const IcpResult match = register_icp(backend_, *states_[current].cloud, before, models, relaxation_icp_);
       ++matches;
       ++result_.relaxation_matches;
       ++result_.scans[current].relaxation_matches;
@@ -619,6 +626,7 @@ class SurveyMatcher {
   const ProgressCallback& progress_;
   const StopRequested& stop_requested_;
   IcpSettings icp_;  ///< settings.icp with min_pairs capped by the overlap threshold
+  IcpSettings relaxation_icp_;  ///< icp_ with step 3's convergence thresholds
   std::vector<ScanState> states_;
   MappingResult result_;
   std::deque<std::size_t> queue_;  ///< kSimultaneous: scans waiting for a relaxation match
@@ -680,6 +688,10 @@ void MappingSettings::validate() const {
   if (max_relaxation_matches_per_scan < 0) throw std::invalid_argument("the relaxation cap must be >= 0");
   if (!(plane_cell_cm > 0.0f) || !std::isfinite(plane_cell_cm)) {
     throw std::invalid_argument("the planes' cell must be a finite length > 0 cm");
+  }
+  if (!(relaxation_min_step_cm >= 0.0) || !(relaxation_min_step_deg >= 0.0) || !std::isfinite(relaxation_min_step_cm) ||
+      !std::isfinite(relaxation_min_step_deg)) {
+    throw std::invalid_argument("the relaxation's convergence thresholds must be finite and >= 0");
   }
   if (max_relaxation_neighbours < 0) throw std::invalid_argument("the relaxation's neighbour cap must be >= 0");
   for (const float factor : retry_bound_factors) {

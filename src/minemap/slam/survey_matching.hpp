@@ -121,6 +121,13 @@ struct MappingSettings {
   /// the survey grows (docs/benchmarks.md, time per scan). 0: the queue is emptied after every scan,
   /// as the paper, with at most 4 x scans so far matches.
   int max_relaxation_matches_per_scan = 8;
+  /// kSimultaneous, step 3: a relaxation match starts where its scan already sits, so it is
+  /// converged once a step moves less than this and turns less than relaxation_min_step_deg: still
+  /// well under the 1.5 cm range noise, with about half the iterations of ICP's own 0.01 cm /
+  /// 0.001 deg at the same error (docs/benchmarks.md; 0.1 cm / 0.01 deg saved more and lost
+  /// accuracy). 0: ICP's own thresholds, as paper() keeps.
+  double relaxation_min_step_cm = 0.03;
+  double relaxation_min_step_deg = 0.003;
   /// Every match is judged (registration/health.hpp); a doubtful one is named in ScanOutcome::health.
   HealthSettings health;
   /// Each scan's surfaces are cut into cubes of this size, and a plane fitted in each (a normal):
@@ -164,6 +171,8 @@ struct MappingSettings {
     settings.dense_models = false;
     settings.max_relaxation_neighbours = 0;
     settings.max_relaxation_matches_per_scan = 0;
+    settings.relaxation_min_step_cm = 0.0;
+    settings.relaxation_min_step_deg = 0.0;
     return settings;
   }
   /// Throws std::invalid_argument naming the bad setting (map_survey calls it once, at entry).
