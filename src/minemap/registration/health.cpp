@@ -60,19 +60,15 @@ RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedClo
   const Eigen::Vector3d translation = correction.block<3, 1>(0, 3);
   const std::span<const Eigen::Vector3f> points = data.points();
   double moved2 = 0.0;
+  std::vector<Eigen::Vector3f> paired_points;  // for the constraint test
+  if (data_planes != nullptr) paired_points.reserve(paired);
   for (std::size_t k = 0; k < nearest.size() && k < points.size(); ++k) {
     if (nearest[k].squared_distance_cm2 < 0.0f || double(nearest[k].squared_distance_cm2) > bound2) continue;
     moved2 += (rotation_minus_identity * points[k].cast<double>() + translation).squaredNorm();
+    if (data_planes != nullptr) paired_points.push_back(points[k]);
   }
   health.moved_cm = paired ? std::sqrt(moved2 / double(paired)) : 0.0;
   if (data_planes != nullptr) {
-    std::vector<Eigen::Vector3f> paired_points;
-    paired_points.reserve(paired);
-    for (std::size_t k = 0; k < nearest.size() && k < points.size(); ++k) {
-      if (nearest[k].squared_distance_cm2 >= 0.0f && double(nearest[k].squared_distance_cm2) <= bound2) {
-        paired_points.push_back(points[k]);
-      }
-    }
     const Matrix6d information = point_to_plane_information(paired_points, *data_planes);
     health.translation_constraint = translation_constraint_ratio(information, &health.weakest_direction);
   }

@@ -444,14 +444,14 @@ class SurveyMatcher {
     return std::nullopt;
   }
 
-  /// The information of the edge `from` -> `to` at the scans' current poses, from the geometry of
-  /// their pairs (registration/match_information.hpp): the probe points of `to` with a partner in
+  /// The information of the edge `from` -> `to` (`from` at its current pose, `to` at `to_pose`),
+  /// from the geometry of their pairs (registration/match_information.hpp): the probe points of `to` with a partner in
   /// `from`'s model within the pair bound, on a plane of `to`'s own surface. Scaled so that its mean
   /// translation information is the settings' (1 / sigma^2), with a floor of
   /// loops.min_information_fraction of that in every direction: a match that could not see a
   /// direction leaves it to the other edges instead of holding it at its guess.
-  Matrix6d edge_information(std::size_t from, std::size_t to, const SurfaceNormals& to_normals) {
-    const ModelPlacement placed{states_[from].model_cloud.get(), rigid_inverse(states_[from].pose) * states_[to].pose};
+  Matrix6d edge_information(std::size_t from, std::size_t to, const Pose& to_pose, const SurfaceNormals& to_normals) {
+    const ModelPlacement placed{states_[from].model_cloud.get(), rigid_inverse(states_[from].pose) * to_pose};
     const std::vector<NearestPair> nearest = backend_.nearest(*states_[to].probe, {&placed, 1}, SearchMethod::kExact,
                                                               PairingSettings{icp_.max_pair_dist_cm});
     const std::span<const Eigen::Vector3f> points = states_[to].probe->points();
@@ -488,7 +488,7 @@ class SurveyMatcher {
       // A scan left at odometry constrains its neighbours only weakly.
       const bool matched = result_.scans[k].registered && result_.scans[k - 1].registered;
       edges.push_back({k - 1, k, rigid_inverse(poses[k - 1]) * poses[k], matched ? 1.0 : 0.01});
-      if (matched && planes(k)) edges.back().information = edge_information(k - 1, k, *planes(k));
+      if (matched && planes(k)) edges.back().information = edge_information(k - 1, k, states_[k].pose, *planes(k));
     }
     const std::size_t chain_edges = edges.size();
     // For each scan, the nearest scan at least `gap` earlier, when near enough. Scans in a row that
@@ -532,12 +532,9 @@ class SurveyMatcher {
           loop.gap_before_cm = translation_norm(moved);
           loop.gap_before_deg = rotation_angle_deg(moved);
           edges.push_back({loop.from, loop.to, rigid_inverse(poses[loop.from]) * *matched, 1.0});
+          // At the pose the loop match found, not where the chain left the scan.
           if (planes(loop.to)) {
-            // At the pose the loop match found, not where the chain left the scan.
-            const Pose chain_pose = states_[loop.to].pose;
-            states_[loop.to].pose = *matched;
-            edges.back().information = edge_information(loop.from, loop.to, *planes(loop.to));
-            states_[loop.to].pose = chain_pose;
+            edges.back().information = edge_information(loop.from, loop.to, *matched, *planes(loop.to));
           }
         }
         result_.loops.push_back(loop);
