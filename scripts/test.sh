@@ -2,6 +2,7 @@
 # Builds minemap and runs every test: a check that the build used only packages install-deps.sh
 # installs (scripts/check-deps.sh), the unit tests (OpenCL ones on PoCL, failing when no OpenCL
 # platform is found), the fuzz corpora, the backend-agreement tests again in a -march=native build,
+# the Python package (pip install . from the same build, into build/venv) and its pytest suite,
 # the unit tests again under ASan+UBSan and under TSan (scripts/sanitize.sh), and a short libFuzzer
 # run of every parser.
 # Usage: scripts/test.sh   (SANITIZERS=0 skips the sanitizer runs, FUZZ_SECONDS=0 the libFuzzer run,
@@ -9,19 +10,32 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh test
-echo "--- OpenCL platforms"
+started=$SECONDS
+stage() { echo "--- $* (at $(( (SECONDS - started) / 60 )) min $(( (SECONDS - started) % 60 )) s)"; }
+stage "OpenCL platforms"
 clinfo -l || true
 jobs="$(nproc)"
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_BENCH=ON
+# The Python package's build and test tools, pinned, in a virtualenv inside the build folder (Debian's
+# Python refuses pip installs outside one, PEP 668).
+stage "Python virtualenv build/venv (python/requirements-test.txt from PyPI)"
+[ -x build/venv/bin/python ] || python3 -m venv build/venv
+build/venv/bin/pip install -q --disable-pip-version-check -r python/requirements-test.txt
+# One build for the program, the tests and the Python extension: `pip install .` below reuses it.
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_BENCH=ON -DMINEMAP_BUILD_PYTHON=ON \
+  -DPython_EXECUTABLE="$PWD/build/venv/bin/python" -Dpybind11_DIR="$(build/venv/bin/python -m pybind11 --cmakedir)"
 cmake --build build -j"$jobs"
-echo "--- the build used only what 'scripts/install-deps.sh build' installs"
+stage "the build used only what 'scripts/install-deps.sh build' installs"
 scripts/check-deps.sh build build
-echo "--- unit tests"
+stage "unit tests"
 (cd build && ctest --output-on-failure -j"$jobs" --timeout 900)
+stage "Python package: pip install . (into build/venv, from the same build), then pytest"
+CMAKE_GENERATOR="Unix Makefiles" build/venv/bin/pip install -q --no-build-isolation --no-deps \
+  --config-settings=build-dir=build .
+(cd python/tests && MINEMAP_CLI="$PWD/../../build/minemap" ../../build/venv/bin/python -m pytest -q -p no:cacheprovider .)
 if [ "${NATIVE:-1}" != "0" ]; then
   # -march=native offers FMA: the library is built with -ffp-contract=off so that the CPU's poses
   # stay those of the OpenCL kernels (FP_CONTRACT OFF). The backend-agreement tests prove it there.
-  echo "--- native build (-march=native): CPU and OpenCL still agree bit for bit"
+  stage "native build (-march=native): CPU and OpenCL still agree bit for bit"
   cmake -S . -B build-native -DCMAKE_BUILD_TYPE=Release -DMINEMAP_NATIVE=ON -DMINEMAP_BUILD_BENCH=OFF > /dev/null
   cmake --build build-native -j"$jobs" --target test_search test_slice_filter test_mapping test_determinism
   (cd build-native && ctest --output-on-failure -j"$jobs" --timeout 900 \
@@ -29,12 +43,12 @@ if [ "${NATIVE:-1}" != "0" ]; then
 fi
 fuzz_build_dir=build-fuzz
 if [ "${SANITIZERS:-1}" != "0" ]; then
-  echo "--- unit tests under ASan+UBSan and TSan"
+  stage "unit tests under ASan+UBSan and TSan"
   scripts/sanitize.sh all
   # The fuzz targets need the same library build (clang, address+undefined, RelWithDebInfo): reuse it.
   fuzz_build_dir=build-asan
 fi
 if [ "${FUZZ_SECONDS:-10}" != "0" ]; then
-  echo "--- libFuzzer, ${FUZZ_SECONDS:-10} s per parser"
+  stage "libFuzzer, ${FUZZ_SECONDS:-10} s per parser"
   FUZZ_BUILD_DIR="$fuzz_build_dir" scripts/fuzz.sh
 fi

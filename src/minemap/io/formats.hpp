@@ -16,6 +16,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <span>
 #include <string>
@@ -143,10 +144,14 @@ struct SurveyReadSettings {
 
 /// A survey loaded from a folder.
 struct Survey {
-  std::string format;  ///< "uos", "pcd", "ply", "kitti"
+  std::string format;  ///< "uos", "pcd", "ply", "kitti"; "las", "laz", "e57" (set_foreign_survey_reader)
   LengthUnit unit = LengthUnit::kCentimetre;  ///< the unit the files were read in (outputs use it)
   std::vector<Scan> scans;                    ///< in natural order of names (full2 before full10); pose_cm = initial guess
   std::optional<std::vector<Pose>> truth_cm;  ///< reference T_world_file per scan, where present
+  /// The survey's local frame in the files' frame (cm): file coordinates = world + origin_cm. Zero,
+  /// but for georeferenced surveys (LAS/LAZ, E57), whose UTM coordinates floats cannot hold to the
+  /// millimetre; outputs are in the local frame and report.json says the origin.
+  Eigen::Vector3d origin_cm = Eigen::Vector3d::Zero();
   /// Warnings for the user, one line each: NaN points dropped, gaps in the numbering.
   std::vector<std::string> warnings;
 };
@@ -169,6 +174,17 @@ inline constexpr std::size_t kUnitCheckMinPoints = 100;
 /// same number or the same points (kInconsistentSurvey), the units check (kSuspiciousUnits). Gaps in
 /// the numbering and dropped NaN points are Survey::warnings.
 Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings = {});
+
+/// Surveys read outside the C++ core: LAS/LAZ (a folder of .las/.laz files) and E57 (an .e57 file,
+/// or a folder of them). Their readers are the Python package's (python/minemap/formats.py, on
+/// laspy and pye57: one implementation), handed in here when the package loads; read_survey calls
+/// it for such a path and checks its survey as any other (initial and reference poses, sizes,
+/// duplicates). Without it read_survey refuses such a survey, saying how to read it.
+/// Thread-safety: set it before reading (the package sets it on import).
+using ForeignSurveyReader = std::function<Survey(const fs::path& path, const SurveyReadSettings& settings)>;
+void set_foreign_survey_reader(ForeignSurveyReader reader);
+/// An .las/.laz/.e57 file, or a folder holding such files and no scans of the other layouts.
+bool is_foreign_survey(const fs::path& path);
 
 /// Writes a survey in uos layout (scanNNN.3d + .pose), and truth/ when given.
 void write_uos_survey(const fs::path& dir, std::span<const Scan> scans,

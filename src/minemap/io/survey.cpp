@@ -25,6 +25,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -394,7 +395,10 @@ std::string describe_dropped(const DroppedPoints& dropped) {
 
 }  // namespace
 
-Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
+namespace {
+/// The layouts read here: uos, PCD, PLY, KITTI.
+void read_native_survey(const fs::path& dir, const SurveyReadSettings& settings, Survey& survey, DroppedPoints& dropped,
+                        std::vector<std::uint64_t>& numbers, std::string (*&name_of)(std::uint64_t)) {
   const FolderContent content = list_folder(dir);
   const int layouts = !content.uos.empty() + !content.pcd.empty() + !content.ply.empty() +
                       !content.kitti_bin.empty() + !content.kitti_xyz_dirs.empty();
@@ -410,17 +414,6 @@ Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
                              " KITTI .bin); put each survey in its own folder",
                          InputProblem::kInconsistentSurvey);
   }
-  if (settings.initial_poses) {
-    std::error_code error;
-    if (!fs::exists(*settings.initial_poses, error)) {
-      detail::fail_in_file(settings.initial_poses->string(), "missing: the initial poses file does not exist",
-                           InputProblem::kInconsistentSurvey);
-    }
-  }
-  Survey survey;
-  DroppedPoints dropped;
-  std::vector<std::uint64_t> numbers;  // uos / KITTI scan numbers in order, for the gaps warning
-  std::string (*name_of)(std::uint64_t) = kitti_stem;
   const ReadSettings& read = settings.read;
   if (!content.uos.empty()) {
     survey.format = "uos";
@@ -462,6 +455,71 @@ Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
     if (!content.kitti_bin.empty() && !content.kitti_xyz_dirs.empty()) numbers.clear();
     const fs::path graph = dir / "graph.txt";
     if (fs::exists(graph)) survey.truth_cm = read_pose_list(graph, survey.unit, survey.scans.size(), read);
+  }
+}
+}  // namespace
+
+namespace {
+ForeignSurveyReader& foreign_reader() {
+  static ForeignSurveyReader reader;
+  return reader;
+}
+bool is_foreign_file(const fs::path& path) {
+  std::string extension = path.extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return extension == ".las" || extension == ".laz" || extension == ".e57";
+}
+
+/// A LAS/LAZ or E57 survey, through the reader the Python package handed in.
+Survey read_foreign_survey(const fs::path& path, const SurveyReadSettings& settings) {
+  if (!foreign_reader()) {
+    detail::fail_in_file(path.string(),
+                         "is a LAS/LAZ or E57 survey: these are read by minemap's Python package (laspy, pye57); "
+                         "install it (pip install . in minemap's source) and run `python -m minemap map ...`");
+  }
+  Survey survey = foreign_reader()(path, settings);
+  if (survey.scans.empty()) detail::fail_in_file(path.string(), "no scans found", InputProblem::kEmpty);
+  return survey;
+}
+}  // namespace
+
+void set_foreign_survey_reader(ForeignSurveyReader reader) { foreign_reader() = std::move(reader); }
+
+bool is_foreign_survey(const fs::path& path) {
+  std::error_code error;
+  if (!fs::is_directory(path, error)) return is_foreign_file(path);
+  bool foreign = false;
+  for (const auto& entry : fs::directory_iterator(path, error)) {
+    if (!entry.is_regular_file(error)) continue;
+    const fs::path& file = entry.path();
+    if (is_foreign_file(file)) {
+      foreign = true;
+    } else if (uos_scan_number(file.filename().string()) || file.extension() == ".pcd" ||
+               file.extension() == ".ply" || (file.extension() == ".bin" && all_digits(file.stem().string()))) {
+      return false;  // the native layouts' own checks report a folder of several layouts
+    }
+  }
+  return foreign;
+}
+
+Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
+  if (settings.initial_poses) {
+    std::error_code error;
+    if (!fs::exists(*settings.initial_poses, error)) {
+      detail::fail_in_file(settings.initial_poses->string(), "missing: the initial poses file does not exist",
+                           InputProblem::kInconsistentSurvey);
+    }
+  }
+  Survey survey;
+  DroppedPoints dropped;
+  std::vector<std::uint64_t> numbers;  // uos / KITTI scan numbers in order, for the gaps warning
+  std::string (*name_of)(std::uint64_t) = kitti_stem;
+  const ReadSettings& read = settings.read;
+  if (is_foreign_survey(dir)) {
+    survey = read_foreign_survey(dir, settings);
+  } else {
+    read_native_survey(dir, settings, survey, dropped, numbers, name_of);
   }
   if (settings.initial_poses) {
     const std::vector<Pose> poses = read_pose_list(*settings.initial_poses, survey.unit, survey.scans.size(), read);

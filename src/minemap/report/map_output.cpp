@@ -49,50 +49,15 @@ std::optional<TruthComparison> compare_with_truth(const MappingResult& result,
   return TruthComparison{pose_errors(initial, *truth_cm), pose_errors(registered, *truth_cm)};
 }
 
-std::string write_map_outputs(const std::filesystem::path& out_dir, const MappingResult& result,
-                              const std::optional<std::vector<Pose>>& truth_cm, const MappingSettings& settings,
-                              const MapOutputSettings& output) {
-  const auto start = std::chrono::steady_clock::now();
-  std::filesystem::create_directories(out_dir);
+std::string map_report(const MappingResult& result, const std::optional<std::vector<Pose>>& truth_cm,
+                       const MappingSettings& settings, const MapOutputSettings& output, double write_s) {
   const double unit_per_cm = 1.0 / centimetres_per(output.unit);
-
-  std::vector<io::TimedPose> trajectory;
-  std::vector<Eigen::Vector3f> map_points;
-  std::vector<Eigen::Vector3d> positions, reference_positions;
-  // Files that do not depend on each other are written in parallel (each one atomically); the
-  // first failure propagates as it would from a serial loop.
-  tbb::parallel_for(std::size_t{0}, result.scans.size(), [&](std::size_t i) {
-    const ScanOutcome& scan = result.scans[i];
-    io::write_uos_frames(out_dir / (scan.name + ".frames"), scan.frames, output.unit);
-    io::write_uos_pose(out_dir / (scan.name + ".pose"), scan.pose_cm, output.unit);
-  });
-  for (std::size_t i = 0; i < result.scans.size(); ++i) {
-    const ScanOutcome& scan = result.scans[i];
-    trajectory.push_back({static_cast<double>(i), scan.pose_cm});
-    positions.push_back(scan.pose_cm.block<3, 1>(0, 3));
-    const Eigen::Matrix3d r = scan.world_from_points.block<3, 3>(0, 0);
-    const Eigen::Vector3d t = scan.world_from_points.block<3, 1>(0, 3);
-    for (const auto& p : scan.used_points_cm) map_points.push_back((r * p.cast<double>() + t).cast<float>());
-  }
-  if (truth_cm && truth_cm->size() == result.scans.size()) {
-    // Reference trajectory expressed in the master scan's frame, as the registered one is.
-    const Pose align = result.scans.front().pose_cm * rigid_inverse(truth_cm->front());
-    for (const auto& pose : *truth_cm) reference_positions.push_back((align * pose).block<3, 1>(0, 3));
-  }
-  report::MapViewSettings view;
-  view.up_axis = output.up_axis;
-  view.title = output.title;
-  const report::MapViewInput input{map_points, positions, reference_positions};
-  tbb::parallel_invoke(
-      [&] {
-        io::write_tum(out_dir / "trajectory.tum", trajectory, output.unit);
-        io::write_ply(out_dir / "map.ply", map_points, true, output.unit);
-      },
-      [&] { report::write_top_view_png(out_dir / "top.png", input, view); },
-      [&] { report::write_side_view_png(out_dir / "side.png", input, view); });
-
   nlohmann::json report;
   report["unit"] = to_string(output.unit);
+  if (!output.origin_cm.isZero()) {
+    report["origin"] = {output.origin_cm.x() * unit_per_cm, output.origin_cm.y() * unit_per_cm,
+                        output.origin_cm.z() * unit_per_cm};
+  }
   report["mode"] = to_string(settings.mode);
   report["partial"] = output.survey_scans > result.scans.size();
   report["scans_in_survey"] = std::max(output.survey_scans, result.scans.size());
@@ -168,7 +133,6 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
                      {"gap_after_deg", loop.gap_after_deg}});
   }
   report["loop_closures"] = loops;
-  const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   report["timings_s"] = {{"load", output.load_s},
                          {"filter", result.times.filter_s},
                          {"tree_build", result.times.tree_build_s},
@@ -184,7 +148,52 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
     report["truth"] = {{"odometry", errors_json(comparison->odometry, unit_per_cm)},
                        {"registered", errors_json(comparison->registered, unit_per_cm)}};
   }
-  const std::string text = report.dump(2) + "\n";
+  return report.dump(2) + "\n";
+}
+
+std::string write_map_outputs(const std::filesystem::path& out_dir, const MappingResult& result,
+                              const std::optional<std::vector<Pose>>& truth_cm, const MappingSettings& settings,
+                              const MapOutputSettings& output) {
+  const auto start = std::chrono::steady_clock::now();
+  std::filesystem::create_directories(out_dir);
+
+  std::vector<io::TimedPose> trajectory;
+  std::vector<Eigen::Vector3f> map_points;
+  std::vector<Eigen::Vector3d> positions, reference_positions;
+  // Files that do not depend on each other are written in parallel (each one atomically); the
+  // first failure propagates as it would from a serial loop.
+  tbb::parallel_for(std::size_t{0}, result.scans.size(), [&](std::size_t i) {
+    const ScanOutcome& scan = result.scans[i];
+    io::write_uos_frames(out_dir / (scan.name + ".frames"), scan.frames, output.unit);
+    io::write_uos_pose(out_dir / (scan.name + ".pose"), scan.pose_cm, output.unit);
+  });
+  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+    const ScanOutcome& scan = result.scans[i];
+    trajectory.push_back({static_cast<double>(i), scan.pose_cm});
+    positions.push_back(scan.pose_cm.block<3, 1>(0, 3));
+    const Eigen::Matrix3d r = scan.world_from_points.block<3, 3>(0, 0);
+    const Eigen::Vector3d t = scan.world_from_points.block<3, 1>(0, 3);
+    for (const auto& p : scan.used_points_cm) map_points.push_back((r * p.cast<double>() + t).cast<float>());
+  }
+  if (truth_cm && truth_cm->size() == result.scans.size()) {
+    // Reference trajectory expressed in the master scan's frame, as the registered one is.
+    const Pose align = result.scans.front().pose_cm * rigid_inverse(truth_cm->front());
+    for (const auto& pose : *truth_cm) reference_positions.push_back((align * pose).block<3, 1>(0, 3));
+  }
+  report::MapViewSettings view;
+  view.up_axis = output.up_axis;
+  view.title = output.title;
+  const report::MapViewInput input{map_points, positions, reference_positions};
+  tbb::parallel_invoke(
+      [&] {
+        io::write_tum(out_dir / "trajectory.tum", trajectory, output.unit);
+        io::write_ply(out_dir / "map.ply", map_points, true, output.unit);
+      },
+      [&] { report::write_top_view_png(out_dir / "top.png", input, view); },
+      [&] { report::write_side_view_png(out_dir / "side.png", input, view); });
+
+  const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const std::string text = map_report(result, truth_cm, settings, output, write_s);
   write_file_atomically(out_dir / "report.json", text);
   return text;
 }

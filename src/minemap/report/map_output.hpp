@@ -21,6 +21,8 @@ struct MapOutputSettings {
   /// The survey's scan count; more than the result holds: an interrupted run's partial map (report.json
   /// says "partial"). 0: the result's own count.
   std::size_t survey_scans = 0;
+  /// The survey's local frame in its files' frame (io::Survey::origin_cm): report.json's "origin".
+  Eigen::Vector3d origin_cm = Eigen::Vector3d::Zero();
 };
 
 /// Pose errors before (odometry) and after registration, when the survey has reference poses.
@@ -31,6 +33,10 @@ struct TruthComparison {
 
 std::optional<TruthComparison> compare_with_truth(const MappingResult& result,
                                                   const std::optional<std::vector<Pose>>& truth_cm);
+
+/// report.json's text (write_s: the time writing the other outputs took, for its timings).
+std::string map_report(const MappingResult& result, const std::optional<std::vector<Pose>>& truth_cm,
+                       const MappingSettings& settings, const MapOutputSettings& output, double write_s = 0.0);
 
 /// Writes every output into `out_dir` (created if missing). Returns the report as JSON text.
 std::string write_map_outputs(const std::filesystem::path& out_dir, const MappingResult& result,
