@@ -56,6 +56,13 @@ tar -C "$root" -xf "$cache/bookworm-base.tar"
 cp /etc/apt/sources.list.d/*.sources "$root/etc/apt/sources.list.d/" 2>/dev/null || true
 [ -f /etc/apt/sources.list ] && cp /etc/apt/sources.list "$root/etc/apt/sources.list"
 cp -L /etc/resolv.conf "$root/etc/resolv.conf" 2>/dev/null || true
+# The network's trust: certificate authorities this machine adds to Debian's (a proxy's, say), which
+# pip needs to reach PyPI; apt's ca-certificates puts them in the bundle when install-deps installs it.
+if compgen -G "/usr/local/share/ca-certificates/*.crt" > /dev/null; then
+  mkdir -p "$root/usr/local/share/ca-certificates"
+  cp /usr/local/share/ca-certificates/*.crt "$root/usr/local/share/ca-certificates/"
+  [ -x "$root/usr/sbin/update-ca-certificates" ] && chroot "$root" /usr/sbin/update-ca-certificates > /dev/null 2>&1 || true
+fi
 for m in proc sys dev dev/pts; do
   mkdir -p "$root/$m"
   case "$m" in

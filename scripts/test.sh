@@ -19,6 +19,9 @@ jobs="$(nproc)"
 # Python refuses pip installs outside one, PEP 668).
 stage "Python virtualenv build/venv (python/requirements-test.txt from PyPI)"
 [ -x build/venv/bin/python ] || python3 -m venv build/venv
+# pip trusts the system's certificate authorities (ca-certificates, and what the administrator added:
+# a proxy's), not only its own copy of Mozilla's.
+if [ -z "${PIP_CERT:-}" ] && [ -f /etc/ssl/certs/ca-certificates.crt ]; then export PIP_CERT=/etc/ssl/certs/ca-certificates.crt; fi
 build/venv/bin/pip install -q --disable-pip-version-check -r python/requirements-test.txt
 # One build for the program, the tests and the Python extension: `pip install .` below reuses it.
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMINEMAP_BUILD_BENCH=ON -DMINEMAP_BUILD_PYTHON=ON \
