@@ -17,6 +17,12 @@
 # 3 min under ASan) and MappingSimulatedMine.SimultaneousMatchingIsAccurateAndBeatsPairwise (24
 # scans: 3 s in Release, 3-4 min under each sanitizer). Simultaneous matching, the default mode, runs
 # here in MappingDeterminism.* (5 scans, 1 and 2 threads), Determinism.*, Cli.* and BadInput.*.
+# Since the Python suite joined scripts/test.sh (CI stays under 30 minutes), three more accuracy
+# checks stay out, each 15-24 s in Release and minutes under a sanitizer, whose code smaller tests
+# run here: MappingSimulatedMine.TheBoundedRelaxationIsAsAccurateAsThePapersQueue (the bounded and
+# the paper's queue: MappingDeterminism, Presets/*), HealthRealData.CarScans... (the health checks
+# and retries: HealthSurveys.*, Health.*), MappingLoops.ALoopSurveyIsClosedAndItsEndsAgree (loop
+# closing: Cli.ALoopSurveyIsClosedAndReported, PoseGraph.*).
 # Every other test runs under both sanitizers.
 #
 # What is not instrumented, and why (tests/sanitizers/ holds each file, one reason per entry):
@@ -52,7 +58,7 @@ cc="${cxx/clang++/clang}"; cc="${cc/g++/gcc}"
 jobs="${SANITIZE_JOBS:-$(nproc)}"
 timeout="${SANITIZE_TIMEOUT:-900}"
 supp="$repo_root/tests/sanitizers"
-heavy='^MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise$'
+heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBound|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree)$'
 
 # Builds oneTBB with -fsanitize=thread into $1/install once; prints its TBB_DIR.
 tsan_tbb() {
