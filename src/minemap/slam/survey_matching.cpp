@@ -35,10 +35,9 @@ struct ScanState {
 /// on a CPU backend); nothing here is reset by hand.
 class SurveyMatcher {
  public:
-  SurveyMatcher(const std::vector<Scan>& scans, const MappingSettings& settings, ComputeBackend& backend,
-                const ProgressCallback& progress, const StopRequested& stop_requested)
-      : scans_(scans),
-        settings_(settings),
+  SurveyMatcher(const MappingSettings& settings, ComputeBackend& backend, const ProgressCallback& progress,
+                const StopRequested& stop_requested)
+      : settings_(settings),
         backend_(backend),
         progress_(progress),
         stop_requested_(stop_requested),
@@ -52,49 +51,180 @@ class SurveyMatcher {
     if (settings.relaxation_min_step_deg > 0.0) {
       relaxation_icp_.termination.min_rotation_step_deg = settings.relaxation_min_step_deg;
     }
+    result_.backend = backend_.name() + ": " + backend_.device_description();
   }
 
-  MappingResult run() {
-    result_.backend = backend_.name() + ": " + backend_.device_description();
-    prepare_all();
-    match_all();
-    if (!result_.interrupted && settings_.loops.enabled && settings_.mode != MatchingMode::kSimultaneous) {
+  /// map_survey: every scan prepared at once (in parallel), then matched in order, then finished.
+  MappingResult run(const std::vector<Scan>& scans) {
+    total_ = scans.size();
+    prepare_all(scans);
+    for (std::size_t i = 1; i < count_; ++i) {
+      if (stop_requested()) {
+        // Scans 0..i-1 are final (a relaxation cut short leaves them where its last match put them).
+        result_.interrupted = true;
+        result_.scans_matched = i;
+        return std::move(result_);
+      }
+      match_scan(i);
+    }
+    finish();
+    return std::move(result_);
+  }
+
+  /// LiveMapper::add: one more scan, prepared alone (the same clouds as prepare_all's), then matched.
+  void add(const Scan& scan) {
+    total_ = count_ + 1;
+    prepare_one(scan);
+    if (count_ > 1) match_scan(count_ - 1);
+  }
+
+  /// LiveMapper::restore: one more scan prepared, its outcome as a previous run left it.
+  void restore(const Scan& scan, const ScanOutcome& outcome) {
+    total_ = count_ + 1;
+    prepare_one(scan);
+    const std::size_t i = count_ - 1;
+    ScanOutcome& own = result_.scans[i];
+    std::vector<Eigen::Vector3f> used = std::move(own.used_points_cm);
+    const std::size_t points_in = own.points_in, points_used = own.points_used, outliers = own.outliers_replaced;
+    own = outcome;
+    own.used_points_cm = std::move(used);
+    own.points_in = points_in;
+    own.points_used = points_used;
+    own.outliers_replaced = outliers;
+    states_[i].pose = outcome.world_from_points;
+  }
+
+  /// What follows the last scan: the rest of the relaxation queue, then loop closing.
+  void finish() {
+    const std::size_t n = count_;
+    if (settings_.mode == MatchingMode::kSimultaneous && !stop_requested() && !queue_.empty()) {
+      // What the per-scan budget left: matched now, at most 2 per scan.
+      const auto start = Clock::now();
+      relax(n - 1, 2 * static_cast<int>(n));
+      result_.times.relaxation_s += seconds_since(start);
+    }
+    if (settings_.mode == MatchingMode::kSimultaneous && stop_requested()) {  // the last relaxation cut short
+      result_.interrupted = true;
+      result_.scans_matched = n;
+      return;
+    }
+    if (settings_.loops.enabled && settings_.mode != MatchingMode::kSimultaneous) {
       const auto start = Clock::now();
       close_loops();
       result_.times.loop_closure_s += seconds_since(start);
     }
-    result_.scans_matched = result_.interrupted ? result_.scans_matched : scans_.size();
-    return std::move(result_);
+    result_.interrupted = false;
+    result_.scans_matched = n;
   }
+
+  MappingResult& result() { return result_; }
+  const MappingResult& result() const { return result_; }
+  const std::deque<std::size_t>& queue() const { return queue_; }
+  void restore_queue(const std::deque<std::size_t>& queue) {
+    queue_ = queue;
+    queued_.assign(count_, false);
+    for (const std::size_t j : queue_) {
+      if (j >= count_) throw std::invalid_argument("a queued scan beyond the scans restored");
+      queued_[j] = true;
+    }
+  }
+  std::size_t size() const { return count_; }
 
  private:
   void report(std::size_t done, const std::string& phase) {
-    if (progress_) progress_(done, scans_.size(), phase);
+    if (progress_) progress_(done, total_, phase);
   }
   bool stop_requested() const { return stop_requested_ && stop_requested_(); }
 
-  void prepare_all() {
-    states_.resize(scans_.size());
-    result_.scans.resize(scans_.size());
+  /// A scan's clouds before their trees: data, the denser model (if any), the health probe (if any).
+  struct Reduced {
+    std::vector<Eigen::Vector3f> data, model, probe;
+    bool has_model = false, has_probe = false;
+  };
+
+  bool voxel_models() const {
+    return settings_.dense_models && settings_.model_voxel_cm > 0.0f && settings_.model_voxel_cm < settings_.voxel_cm;
+  }
+
+  void prepare_all(const std::vector<Scan>& scans) {
+    const std::size_t n = scans.size();
+    count_ = n;
+    states_.resize(n);
+    result_.scans.resize(n);
     // Voxel means are a host computation (the same bits for every backend), one scan per task.
-    std::vector<std::vector<Eigen::Vector3f>> voxel_data, voxel_models;
+    std::vector<std::vector<Eigen::Vector3f>> voxel_data(n), voxel_model(n);
     if (settings_.reduction == Reduction::kVoxel) {
       const auto start = Clock::now();
-      voxel_data.resize(scans_.size());
-      voxel_models.resize(scans_.size());
-      const bool models = settings_.dense_models && settings_.model_voxel_cm > 0.0f &&
-                          settings_.model_voxel_cm < settings_.voxel_cm;
-      tbb::parallel_for(std::size_t{0}, scans_.size(), [&](std::size_t i) {
-        voxel_data[i] = voxel_mean_filter(scans_[i].points_cm, settings_.voxel_cm);
-        if (models) voxel_models[i] = voxel_mean_filter(scans_[i].points_cm, settings_.model_voxel_cm);
+      const bool models = voxel_models();
+      tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+        voxel_data[i] = voxel_mean_filter(scans[i].points_cm, settings_.voxel_cm);
+        if (models) voxel_model[i] = voxel_mean_filter(scans[i].points_cm, settings_.model_voxel_cm);
       });
       result_.times.filter_s += seconds_since(start);
     }
-    std::vector<std::vector<Eigen::Vector3f>> data_points(scans_.size()), model_points_of(scans_.size()),
-        probe_points(scans_.size());
-    std::vector<bool> has_model(scans_.size(), false), has_probe(scans_.size(), false);
-    for (std::size_t i = 0; i < scans_.size(); ++i) {
-      const Scan& scan = scans_[i];
+    std::vector<std::vector<Eigen::Vector3f>> data_points(n), models, probes;
+    std::vector<bool> has_model(n, false), has_probe(n, false);
+    for (std::size_t i = 0; i < n; ++i) {
+      Reduced reduced = reduce(i, scans[i], std::move(voxel_data[i]), std::move(voxel_model[i]));
+      data_points[i] = std::move(reduced.data);
+      has_model[i] = reduced.has_model;
+      has_probe[i] = reduced.has_probe;
+      if (reduced.has_model) models.push_back(std::move(reduced.model));
+      if (reduced.has_probe) probes.push_back(std::move(reduced.probe));
+      report(i + 1, "filtering");
+    }
+    // Every tree at once (the CPU backend builds them in parallel); clouds in scan order.
+    const auto start = Clock::now();
+    auto data_clouds = backend_.prepare_many(std::move(data_points), settings_.tree);
+    auto model_clouds = backend_.prepare_many(std::move(models), settings_.tree);
+    auto probe_clouds = backend_.prepare_many(std::move(probes), settings_.tree);
+    std::size_t next_model = 0, next_probe = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      ScanState& state = states_[i];
+      state.cloud = std::move(data_clouds[i]);
+      state.model_cloud = has_model[i] ? std::move(model_clouds[next_model++]) : state.cloud;
+      state.probe = has_probe[i] ? std::move(probe_clouds[next_probe++]) : state.cloud;
+    }
+    if (needs_planes()) {
+      tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+        states_[i].planes.emplace(states_[i].model_cloud->points(), settings_.plane_cell_cm);
+      });
+    }
+    result_.times.tree_build_s += seconds_since(start);
+  }
+
+  bool needs_planes() const {
+    return settings_.health.enabled || (settings_.loops.enabled && settings_.loops.information_from_geometry);
+  }
+
+  /// One scan as prepare_all prepares it, alone: prepare() builds the tree prepare_many would.
+  void prepare_one(const Scan& scan) {
+    const std::size_t i = count_++;
+    states_.emplace_back();
+    result_.scans.emplace_back();
+    std::vector<Eigen::Vector3f> voxel_data, voxel_model;
+    if (settings_.reduction == Reduction::kVoxel) {
+      const auto start = Clock::now();
+      voxel_data = voxel_mean_filter(scan.points_cm, settings_.voxel_cm);
+      if (voxel_models()) voxel_model = voxel_mean_filter(scan.points_cm, settings_.model_voxel_cm);
+      result_.times.filter_s += seconds_since(start);
+    }
+    Reduced reduced = reduce(i, scan, std::move(voxel_data), std::move(voxel_model));
+    const auto start = Clock::now();
+    ScanState& state = states_[i];
+    state.cloud = backend_.prepare(std::move(reduced.data), settings_.tree);
+    state.model_cloud = reduced.has_model ? backend_.prepare(std::move(reduced.model), settings_.tree) : state.cloud;
+    state.probe = reduced.has_probe ? backend_.prepare(std::move(reduced.probe), settings_.tree) : state.cloud;
+    if (needs_planes()) state.planes.emplace(state.model_cloud->points(), settings_.plane_cell_cm);
+    result_.times.tree_build_s += seconds_since(start);
+  }
+
+  /// Scan i reduced as the settings say (voxel_data, voxel_model: its voxel means, kVoxel), with its
+  /// outcome's and state's starting values.
+  Reduced reduce(std::size_t i, const Scan& scan, std::vector<Eigen::Vector3f> voxel_data,
+                 std::vector<Eigen::Vector3f> voxel_model) {
+    Reduced reduced;
+    {
       ScanOutcome& outcome = result_.scans[i];
       outcome.name = scan.name;
       outcome.initial_pose_cm = scan.pose_cm;
@@ -104,7 +234,7 @@ class SurveyMatcher {
       auto start = Clock::now();
       std::vector<Eigen::Vector3f> points;
       if (settings_.reduction == Reduction::kVoxel) {
-        points = std::move(voxel_data[i]);
+        points = std::move(voxel_data);
       } else if (scan.has_slices() && settings_.filter_enabled) {
         SliceFilterResult filtered = backend_.filter_slices(scan, settings_.filter);
         outcome.outliers_replaced = filtered.outliers_replaced;
@@ -120,8 +250,8 @@ class SurveyMatcher {
       std::vector<Eigen::Vector3f> model_points;
       bool dense_model = false;
       if (settings_.reduction == Reduction::kVoxel) {
-        dense_model = !voxel_models[i].empty();
-        model_points = std::move(voxel_models[i]);
+        dense_model = !voxel_model.empty();
+        model_points = std::move(voxel_model);
       } else if (settings_.dense_models && scan.has_slices() && settings_.filter_enabled &&
           settings_.model_slice_stride < settings_.filter.slice_stride) {
         SliceFilterSettings model_filter = settings_.filter;
@@ -138,44 +268,21 @@ class SurveyMatcher {
       outcome.used_points_cm = points;
       const std::size_t stride = static_cast<std::size_t>(settings_.health.probe_stride);
       if (settings_.health.enabled && stride > 1) {
-        for (std::size_t k = 0; k < points.size(); k += stride) probe_points[i].push_back(points[k]);
-        has_probe[i] = true;
+        for (std::size_t k = 0; k < points.size(); k += stride) reduced.probe.push_back(points[k]);
+        reduced.has_probe = true;
       }
-      data_points[i] = std::move(points);
+      reduced.data = std::move(points);
       if (dense_model) {
-        model_points_of[i] = std::move(model_points);
-        has_model[i] = true;
+        reduced.model = std::move(model_points);
+        reduced.has_model = true;
       }
       ScanState& state = states_[i];
       state.odometry = scan.world_from_points();
       state.pose = state.odometry;
       state.points_from_file = rigid_inverse(scan.world_from_points()) * scan.pose_cm;
       outcome.world_from_points = state.pose;
-      report(i + 1, "filtering");
     }
-    // Every tree at once (the CPU backend builds them in parallel); clouds in scan order.
-    const auto start = Clock::now();
-    auto data_clouds = backend_.prepare_many(std::move(data_points), settings_.tree);
-    std::vector<std::vector<Eigen::Vector3f>> models, probes;
-    for (std::size_t i = 0; i < scans_.size(); ++i) {
-      if (has_model[i]) models.push_back(std::move(model_points_of[i]));
-      if (has_probe[i]) probes.push_back(std::move(probe_points[i]));
-    }
-    auto model_clouds = backend_.prepare_many(std::move(models), settings_.tree);
-    auto probe_clouds = backend_.prepare_many(std::move(probes), settings_.tree);
-    std::size_t next_model = 0, next_probe = 0;
-    for (std::size_t i = 0; i < scans_.size(); ++i) {
-      ScanState& state = states_[i];
-      state.cloud = std::move(data_clouds[i]);
-      state.model_cloud = has_model[i] ? std::move(model_clouds[next_model++]) : state.cloud;
-      state.probe = has_probe[i] ? std::move(probe_clouds[next_probe++]) : state.cloud;
-    }
-    if (settings_.health.enabled || (settings_.loops.enabled && settings_.loops.information_from_geometry)) {
-      tbb::parallel_for(std::size_t{0}, scans_.size(), [&](std::size_t i) {
-        states_[i].planes.emplace(states_[i].model_cloud->points(), settings_.plane_cell_cm);
-      });
-    }
-    result_.times.tree_build_s += seconds_since(start);
+    return reduced;
   }
 
   const SurfaceNormals* planes_of(std::size_t i) const {
@@ -329,7 +436,7 @@ class SurveyMatcher {
   std::shared_ptr<const PreparedCloud> build_metascan(std::size_t i, const Pose& frame, const Pose& at, double grow_cm,
                                                       bool whole_map = false) {
     // whole_map: every other scan near it, earlier or later (judging the final map).
-    std::vector<std::size_t> near = nearby(i, whole_map ? scans_.size() : i);
+    std::vector<std::size_t> near = nearby(i, whole_map ? count_ : i);
     if (settings_.loops.enabled && !whole_map) {  // recent scans only: a loop is the relaxation's to close
       const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
       std::erase_if(near, [&](std::size_t j) { return j + gap < i; });
@@ -474,7 +581,7 @@ class SurveyMatcher {
   /// Loops (MappingSettings::loops): candidates by position, each matched, then one relaxation of
   /// the scan graph over the chain of scan-to-scan steps and the loop edges that were trusted.
   void close_loops() {
-    const std::size_t n = scans_.size();
+    const std::size_t n = count_;
     const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
     if (n <= gap) return;
     std::vector<PoseGraphEdge> edges;
@@ -578,52 +685,37 @@ class SurveyMatcher {
     }
   }
 
-  void match_all() {
-    for (std::size_t i = 1; i < scans_.size(); ++i) {
-      if (stop_requested()) {
-        // Scans 0..i-1 are final (a relaxation cut short leaves them where its last match put them).
-        result_.interrupted = true;
-        result_.scans_matched = i;
-        return;
-      }
-      const auto arrived = Clock::now();
-      switch (settings_.mode) {
-        case MatchingMode::kPairwise: match_pairwise(i); break;
-        case MatchingMode::kIncremental: match_incremental(i); break;
-        case MatchingMode::kSimultaneous: match_pairwise(i); break;
-      }
-      result_.times.pairwise_s += seconds_since(arrived);
-      if (settings_.mode == MatchingMode::kSimultaneous) {
-        const auto start = Clock::now();
-        queued_.resize(i + 1, false);  // step 2: the new scan first (no scan before it could queue it)
-        queue_.push_front(i);
-        queued_[i] = true;
-        const int per_scan = settings_.max_relaxation_matches_per_scan;
-        relax(i, per_scan > 0 ? per_scan : 4 * static_cast<int>(i + 1));
-        result_.times.relaxation_s += seconds_since(start);
-      }
-      result_.scans[i].match_s = seconds_since(arrived);
-      report(i + 1, to_string(settings_.mode));
+  /// Scan i, arrived: its match (the mode's), and for kSimultaneous the relaxation after it (steps 2
+  /// and 3, within the per-scan budget).
+  void match_scan(std::size_t i) {
+    const auto arrived = Clock::now();
+    switch (settings_.mode) {
+      case MatchingMode::kPairwise: match_pairwise(i); break;
+      case MatchingMode::kIncremental: match_incremental(i); break;
+      case MatchingMode::kSimultaneous: match_pairwise(i); break;
     }
-    if (settings_.mode == MatchingMode::kSimultaneous && !stop_requested() && !queue_.empty()) {
-      // What the per-scan budget left: matched now, at most 2 per scan.
+    result_.times.pairwise_s += seconds_since(arrived);
+    if (settings_.mode == MatchingMode::kSimultaneous) {
       const auto start = Clock::now();
-      relax(scans_.size() - 1, 2 * static_cast<int>(scans_.size()));
+      queued_.resize(i + 1, false);  // step 2: the new scan first (no scan before it could queue it)
+      queue_.push_front(i);
+      queued_[i] = true;
+      const int per_scan = settings_.max_relaxation_matches_per_scan;
+      relax(i, per_scan > 0 ? per_scan : 4 * static_cast<int>(i + 1));
       result_.times.relaxation_s += seconds_since(start);
     }
-    if (settings_.mode == MatchingMode::kSimultaneous && stop_requested()) {  // the last relaxation cut short
-      result_.interrupted = true;
-      result_.scans_matched = scans_.size();
-    }
+    result_.scans[i].match_s = seconds_since(arrived);
+    report(i + 1, to_string(settings_.mode));
   }
 
-  const std::vector<Scan>& scans_;
   const MappingSettings& settings_;
   ComputeBackend& backend_;
   const ProgressCallback& progress_;
   const StopRequested& stop_requested_;
   IcpSettings icp_;  ///< settings.icp with min_pairs capped by the overlap threshold
   IcpSettings relaxation_icp_;  ///< icp_ with step 3's convergence thresholds
+  std::size_t count_ = 0;  ///< scans prepared (and, but for the newest, matched)
+  std::size_t total_ = 0;  ///< scans expected, for progress
   std::vector<ScanState> states_;
   MappingResult result_;
   std::deque<std::size_t> queue_;  ///< kSimultaneous: scans waiting for a relaxation match
@@ -732,19 +824,47 @@ MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& 
   settings.validate();
   if (scans.empty()) throw std::invalid_argument("the survey holds no scans");
   try {
-    return SurveyMatcher(scans, settings, backend, progress, stop_requested).run();
+    return SurveyMatcher(settings, backend, progress, stop_requested).run(scans);
   } catch (const BackendError& e) {
     if (backend.name() == "cpu") throw;
     // The device failed mid-run: match everything again on the CPU, which gives the CPU's poses.
     const std::string failed = backend.name() == "opencl" ? "OpenCL" : backend.name();
     CpuBackend cpu;
-    MappingResult result = SurveyMatcher(scans, settings, cpu, progress, stop_requested).run();
+    MappingResult result = SurveyMatcher(settings, cpu, progress, stop_requested).run(scans);
     result.backend_note = "CPU backend (TBB), after the " + failed + " failure in the note";
     result.notes.insert(result.notes.begin(),
                         failed + " failed (" + e.what() + "); the survey was matched again on the CPU");
     return result;
   }
 }
+
+struct LiveMapper::Impl {
+  Impl(const MappingSettings& settings_in, ComputeBackend& backend, StopRequested stop)
+      : settings(settings_in), stop_requested(std::move(stop)), matcher(settings, backend, progress, stop_requested) {}
+  MappingSettings settings;
+  ProgressCallback progress;
+  StopRequested stop_requested;
+  SurveyMatcher matcher;
+};
+
+LiveMapper::LiveMapper(const MappingSettings& settings, ComputeBackend& backend, StopRequested stop_requested) {
+  settings.validate();
+  impl_ = std::make_unique<Impl>(settings, backend, std::move(stop_requested));
+}
+LiveMapper::~LiveMapper() = default;
+void LiveMapper::add(const Scan& scan) { impl_->matcher.add(scan); }
+void LiveMapper::restore(const Scan& scan, const ScanOutcome& outcome) { impl_->matcher.restore(scan, outcome); }
+std::vector<std::size_t> LiveMapper::queue() const {
+  const auto& queue = impl_->matcher.queue();
+  return {queue.begin(), queue.end()};
+}
+void LiveMapper::restore_queue(const std::vector<std::size_t>& queue) {
+  impl_->matcher.restore_queue({queue.begin(), queue.end()});
+}
+MappingResult& LiveMapper::result() { return impl_->matcher.result(); }
+const MappingResult& LiveMapper::result() const { return impl_->matcher.result(); }
+void LiveMapper::finish() { impl_->matcher.finish(); }
+std::size_t LiveMapper::size() const { return impl_->matcher.size(); }
 
 PoseErrors pose_errors(const std::vector<Pose>& estimated, const std::vector<Pose>& reference) {
   if (estimated.size() != reference.size() || estimated.empty()) {

@@ -20,6 +20,7 @@
 // on the host.
 #include <chrono>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -245,6 +246,41 @@ using StopRequested = std::function<bool()>;
 /// fresh CPU backend, saying so in `notes`: the poses are then the CPU run's.
 MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings, ComputeBackend& backend,
                          const ProgressCallback& progress = {}, const StopRequested& stop_requested = {});
+
+/// The many-scan matcher fed scan by scan, as scans arrive (`minemap watch`). add() prepares a scan
+/// and matches it as map_survey matches the i-th scan (its mode's match, and for kSimultaneous the
+/// relaxation's per-scan budget); finish() does what map_survey does after the last scan (the rest of
+/// the relaxation queue, loop closing). Adding a survey's scans in order and finishing gives
+/// map_survey's result bit for bit (times aside): the live run is the offline run. result() between
+/// scans is the map so far (not finished: the relaxation's leftovers and loops wait for finish()).
+/// `stop_requested` is asked between relaxation matches, as map_survey asks it; a stop there leaves
+/// the queue for the next scan, which the offline run would not have done.
+/// Thread-safety: one thread at a time. A BackendError propagates: start again on a CpuBackend (as
+/// map_survey does) by adding the scans again.
+class LiveMapper {
+ public:
+  LiveMapper(const MappingSettings& settings, ComputeBackend& backend, StopRequested stop_requested = {});
+  ~LiveMapper();
+  LiveMapper(const LiveMapper&) = delete;
+  LiveMapper& operator=(const LiveMapper&) = delete;
+
+  void add(const Scan& scan);
+  /// Resuming: a scan an earlier run matched, prepared but not matched again; `outcome` is what that
+  /// run left for it (pose, frames, match, health). Restore scans in order, then restore_queue().
+  void restore(const Scan& scan, const ScanOutcome& outcome);
+  /// kSimultaneous: the scans waiting for a relaxation match, front first (what a resume needs).
+  std::vector<std::size_t> queue() const;
+  void restore_queue(const std::vector<std::size_t>& queue);
+  /// The run so far; resuming restores its counters (iterations, matches, times, notes) here.
+  MappingResult& result();
+  const MappingResult& result() const;
+  void finish();
+  std::size_t size() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 /// Pose errors of `estimated` against `reference`, both expressed relative to scan 0 (the master
 /// fixes the frame): translation in cm, rotation in degrees.
