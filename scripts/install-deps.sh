@@ -8,18 +8,20 @@
 #        scripts/install-deps.sh --optional           prints the optional peers (bench level only)
 #   build  library, CLI, unit tests and the benchmarks that need nothing optional: what a plain
 #          `cmake -S . -B build && cmake --build build` builds (scripts/demo.sh); and what `pip install .`
-#          needs to build the Python package (python3-dev, python3-venv; ca-certificates for PyPI)
-#   test   + clang with its sanitizer runtimes and llvm-symbolizer, a de_DE locale (scripts/test.sh)
+#          needs to build the Python package (python3-dev, python3-venv; ca-certificates for PyPI).
+#          libjs-three: three.js, which the build inlines into map.html
+#   test   + clang with its sanitizer runtimes and llvm-symbolizer, a de_DE locale, chromium (headless:
+#          the test that renders map.html) (scripts/test.sh)
 #   bench  + the peers the benchmarks compare with, and the tools of the timing studies
 set -euo pipefail
 
 build_packages=(build-essential cmake pkg-config libeigen3-dev libtbb-dev ocl-icd-opencl-dev opencl-c-headers
                 opencl-clhpp-headers pocl-opencl-icd clinfo libcli11-dev nlohmann-json3-dev liblzf-dev libpng-dev
-                libgtest-dev libbenchmark-dev
+                libgtest-dev libbenchmark-dev libjs-three
                 python3-dev python3-venv ca-certificates)
 # llvm: llvm-symbolizer, which the sanitizer runtimes call; dpkg-dev: dpkg-source, which unpacks
-# oneTBB's source for the TSan build (scripts/sanitize.sh).
-test_packages=(clang libclang-rt-14-dev llvm dpkg-dev locales)
+# oneTBB's source for the TSan build (scripts/sanitize.sh); chromium: tests/viewer/check_map_html.py.
+test_packages=(clang libclang-rt-14-dev llvm dpkg-dev locales chromium)
 # Optional peers: CMake builds what uses them only where it finds them (bench/CMakeLists.txt).
 optional_packages=(libnanoflann-dev libopen3d-dev libpcl-dev libopenmpi-dev)
 bench_tools=(python3 python3-matplotlib valgrind time)

@@ -26,7 +26,8 @@ TEST(Cli, SimulateThenMapWritesEveryOutputAndReportsTruthErrors) {
   ASSERT_EQ(run_cli("map " + (dir / "survey").string() + " --out " + (dir / "out").string() + " --backend cpu", &output), 0)
       << output;
   EXPECT_NE(output.find("pose error against the reference poses"), std::string::npos) << output;
-  for (const char* name : {"scan000.frames", "scan002.pose", "trajectory.tum", "map.ply", "report.json", "top.png", "side.png"}) {
+  for (const char* name :
+       {"scan000.frames", "scan002.pose", "trajectory.tum", "map.ply", "report.json", "top.png", "side.png", "map.html"}) {
     EXPECT_TRUE(std::filesystem::exists(dir / "out" / name)) << name;
   }
   std::ifstream in(dir / "out" / "report.json");
@@ -249,6 +250,38 @@ TEST(Cli, SigintStopsMappingWithExit130AndNoTempFiles) {
   char first_missing[32];
   std::snprintf(first_missing, sizeof first_missing, "scan%03zu.pose", kept);
   EXPECT_FALSE(std::filesystem::exists(dir / "o" / first_missing));
+}
+
+
+// `watch` on a folder whose scans are all there already: it matches them one by one, finishes at
+// --scans, and writes what `map` of the folder writes (report.json's times aside); a second watch
+// with more scans resumes from watch.json without matching the first ones again. (The scans
+// arriving one by one, Ctrl-C and order are python/tests/test_watch.py's.)
+TEST(Cli, WatchEndsAsMapOfTheSameFolderAndResumes) {
+  TempDir dir("minemap-cli-watch");
+  std::string output;
+  const std::string survey = (dir / "survey").string();
+  ASSERT_EQ(run_cli("simulate --out " + survey + " --scans 4", &output), 0) << output;
+  ASSERT_EQ(run_cli("map " + survey + " --out " + (dir / "map").string() + " --backend cpu --quiet", &output), 0)
+      << output;
+  const std::string live = (dir / "live").string();
+  ASSERT_EQ(run_cli("watch " + survey + " --out " + live + " --backend cpu --scans 2", &output), 0) << output;
+  EXPECT_NE(output.find("scan001: read"), std::string::npos) << output;
+  ASSERT_EQ(run_cli("watch " + survey + " --out " + live + " --backend cpu --scans 4", &output), 0) << output;
+  EXPECT_NE(output.find("2 scans matched before"), std::string::npos) << output;
+  EXPECT_EQ(output.find("scan001: read"), std::string::npos) << output;
+  for (const auto& entry : std::filesystem::directory_iterator(dir / "map")) {
+    const std::string name = entry.path().filename().string();
+    if (name == "report.json") {
+      auto a = nlohmann::json::parse(test::read_text(entry.path()));
+      auto b = nlohmann::json::parse(test::read_text(dir / "live" / name));
+      a.erase("timings_s");
+      b.erase("timings_s");
+      EXPECT_EQ(a, b);
+    } else {
+      EXPECT_TRUE(test::read_text(entry.path()) == test::read_text(dir / "live" / name)) << name;
+    }
+  }
 }
 
 }  // namespace

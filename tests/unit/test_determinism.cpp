@@ -38,7 +38,7 @@ void expect_identical_outputs(const fs::path& a, const fs::path& b) {
   const auto names = file_names(a);
   EXPECT_EQ(names, file_names(b));
   for (const char* expected : {"scan000.frames", "scan003.pose", "trajectory.tum", "map.ply", "top.png", "side.png",
-                               "report.json"}) {
+                               "map.html", "report.json"}) {
     EXPECT_TRUE(names.count(expected)) << expected;
   }
   for (const auto& name : names) {

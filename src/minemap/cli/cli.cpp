@@ -13,19 +13,25 @@
 #include <csignal>
 #include <cstdio>
 #include <iostream>
+#include <sstream>
+#include <thread>
 
 #include "minemap/cli/exit_codes.hpp"
 #include "minemap/core/atomic_file.hpp"
 #include "minemap/core/error.hpp"
+#include "minemap/report/live_state.hpp"
 #include "minemap/report/map_output.hpp"
 #include "minemap/sim/mine_simulator.hpp"
 
 namespace minemap::cli {
 namespace {
 
-/// Set by SIGINT/SIGTERM while run() maps; the mapper stops at the next scan boundary.
+/// SIGINT/SIGTERM received while run() maps (or watches): `map` stops at the next scan boundary at
+/// the first; `watch` finishes the map at the first, and stops at the next boundary at the second.
 volatile std::sig_atomic_t g_interrupted = 0;
-extern "C" void on_interrupt(int) { g_interrupted = 1; }
+extern "C" void on_interrupt(int) {
+  if (g_interrupted < 2) g_interrupted = g_interrupted + 1;
+}
 
 struct Interrupted {};
 
@@ -82,6 +88,34 @@ struct SimulateOptions {
   double loop_m = 0.0;
   double step_m = sim::MineSettings{}.mean_step_cm / 100.0;
 };
+
+/// What `watch` takes beyond `map`'s options.
+struct WatchOptions {
+  std::size_t stop_after_scans = 0;  ///< finish once this many scans are matched (0: on Ctrl-C)
+  double idle_timeout_s = 0.0;       ///< finish after this long without a new scan (0: never)
+  int poll_ms = 500;                 ///< how often the folder is looked at
+};
+
+/// The options of a parsed `watch` that change what is computed, one "name=value" per line, sorted
+/// (CLI11's config text of what was given): a resume with others would not continue the same run.
+/// Where the survey and outputs are, threads, backend and device, and the watch's own options
+/// do not change the poses.
+std::string mapping_options_text(const CLI::App& command) {
+  static const std::vector<std::string> neutral = {"survey", "out", "threads", "backend", "opencl-device", "quiet",
+                                                   "accept-doubtful", "write-unregistered", "scans",
+                                                   "idle-timeout-s", "poll-ms"};
+  std::istringstream config(command.config_to_str(false, false));
+  std::vector<std::string> kept;
+  for (std::string line; std::getline(config, line);) {
+    const std::string name = line.substr(0, line.find('='));
+    if (line.empty() || std::find(neutral.begin(), neutral.end(), name) != neutral.end()) continue;
+    kept.push_back(line);
+  }
+  std::sort(kept.begin(), kept.end());
+  std::string text;
+  for (const auto& k : kept) text += k + "\n";
+  return text;
+}
 
 /// The value of `--preset` anywhere in `args` ("default" when absent or malformed: the parser then
 /// reports the malformed one).
@@ -372,7 +406,7 @@ int run_map(const MapCommand& command, const Hooks& hooks) {
       print_errors("odometry", comparison->odometry, unit_per_cm, to_string(run.survey.unit));
       print_errors("registered", comparison->registered, unit_per_cm, to_string(run.survey.unit));
     }
-    std::printf("wrote %s (frames, poses, trajectory.tum, map.ply, report.json, top.png, side.png)\n",
+    std::printf("wrote %s (frames, poses, trajectory.tum, map.ply, report.json, top.png, side.png, map.html)\n",
                 options.out.c_str());
   }
   if (failed) return exit_code(ExitCode::kRegistrationFailed);
@@ -384,6 +418,218 @@ int run_map(const MapCommand& command, const Hooks& hooks) {
     if (!options.accept_doubtful) return exit_code(ExitCode::kDoubtfulMap);
   }
   return 0;
+}
+
+/// The exit code of a finished map, with the messages `map` prints (unregistered, doubtful).
+int verdict(const MapOptions& options, const MappingResult& result, const std::vector<std::string>& sources) {
+  bool failed = false;
+  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+    if (result.scans[i].registered) continue;
+    failed = true;
+    std::fprintf(stderr, "minemap: %s: scan %s not registered: %s\n", sources[i].c_str(),
+                 result.scans[i].name.c_str(), result.scans[i].failure.c_str());
+  }
+  const std::vector<std::size_t> doubtful = result.doubtful();
+  for (const std::size_t i : doubtful) {
+    std::fprintf(stderr, "minemap: %s: scan %s registered, but doubtful: %s\n", sources[i].c_str(),
+                 result.scans[i].name.c_str(), result.scans[i].health.doubt.c_str());
+  }
+  if (failed) return exit_code(ExitCode::kRegistrationFailed);
+  if (!doubtful.empty() && !options.accept_doubtful) return exit_code(ExitCode::kDoubtfulMap);
+  return 0;
+}
+
+/// `minemap watch`: maps a survey folder while its scans arrive (io::ready_scan_names says when a
+/// scan is complete), with the settings `map` would use. Each new scan is read, matched (LiveMapper:
+/// pairwise, then the relaxation's per-scan budget, as `map` matches it), and the outputs are written
+/// again, atomically file by file, with OUT/watch.json, the state a restart resumes from. At the
+/// first Ctrl-C (or --scans, or --idle-timeout-s) the map is finished as `map` finishes it (the rest
+/// of the relaxation queue, loops) and written: then OUT holds what `minemap map` writes for the
+/// same folder, bit for bit (report.json's times aside). A second Ctrl-C stops at once, leaving the
+/// last scan's outputs, and exits 130.
+int run_watch(const MapCommand& command, const WatchOptions& watch, const std::string& options_text,
+              const Hooks& hooks) {
+  const MapOptions& options = command.options;
+  std::error_code error;
+  if (!fs::is_directory(options.survey, error)) {
+    throw InputError(FileLocation{options.survey.string()}, "is not a folder (watch maps a survey folder as scans arrive)");
+  }
+  if (io::is_foreign_survey(options.survey)) {
+    throw InputError(FileLocation{options.survey.string()},
+                     "watch reads uos, PCD, PLY and KITTI folders; map LAS/LAZ and E57 surveys with `map`");
+  }
+  BackendOptions backend_options = backend_options_from_environment(options.backend);
+  if (!options.opencl_device.empty()) backend_options.opencl.device = options.opencl_device;
+  MapRun run;  // the outputs' view: the survey's unit, format and truth, no points
+  run.backend = make_backend(backend_options);
+  const auto hard_stop = [&] { return g_interrupted >= 2 || (hooks.stop_requested && hooks.stop_requested()); };
+  LiveMapper live(command.settings, *run.backend.backend, hard_stop);
+  std::vector<std::string> sources;
+  const fs::path state_path = options.out / "watch.json";
+  const int max_threads = tbb::info::default_concurrency();
+  tbb::task_arena arena(options.threads > 0 ? std::min(options.threads, max_threads) : max_threads);
+
+  // Reads scans [first, first + count) of the folder as `map` reads them (unit, poses, truth).
+  const auto read_scans = [&](std::size_t first, std::size_t count) {
+    io::SurveyReadSettings read = survey_read_settings(options);
+    read.first_scan = first;
+    read.max_scans = count;
+    io::Survey part = io::read_survey(options.survey, read);
+    if (run.survey.format.empty()) {
+      run.survey.format = part.format;
+      run.survey.unit = part.unit;
+      run.survey.origin_cm = part.origin_cm;
+    }
+    if (part.truth_cm) {
+      if (!run.survey.truth_cm) run.survey.truth_cm.emplace();
+      run.survey.truth_cm->insert(run.survey.truth_cm->end(), part.truth_cm->begin(), part.truth_cm->end());
+    }
+    for (const auto& warning : part.warnings) {
+      if (!options.quiet) std::fprintf(stderr, "minemap: warning: %s\n", warning.c_str());
+    }
+    return part;
+  };
+  const auto write_state = [&](const MappingResult& unfinished, bool finished) {
+    LiveState state;
+    state.options = options_text;
+    state.finished = finished;
+    state.sources = sources;
+    state.result = unfinished;
+    for (ScanOutcome& scan : state.result.scans) scan.used_points_cm.clear();
+    state.queue = live.queue();
+    write_file_atomically(state_path, live_state_json(state));
+  };
+  // The map so far, written as `map` writes one (a partial survey is not "partial": its scans are all matched).
+  const auto write_snapshot = [&](MappingResult result) {
+    result.scans_matched = result.scans.size();
+    run.result = std::move(result);
+    run.survey_scans = run.result.scans.size();
+    if (run.survey.truth_cm && run.survey.truth_cm->size() != run.result.scans.size()) run.survey.truth_cm.reset();
+    write_outputs(command, run, hooks.extra_outputs);
+  };
+
+  // Resume from what an earlier watch of this folder left in OUT.
+  if (fs::exists(state_path, error)) {
+    LiveState state = read_live_state(state_path);
+    if (state.options != options_text) {
+      throw InputError(FileLocation{state_path.string()},
+                       "was written with other mapping options; resume with the same ones, or watch into another "
+                       "--out (saved:\n" + state.options + "given:\n" + options_text + ")",
+                       InputProblem::kInconsistentSurvey);
+    }
+    const std::size_t k = state.result.scans.size();
+    if (k > 0) {
+      io::Survey part = read_scans(0, k);
+      if (part.scans.size() != k) {
+        throw InputError(FileLocation{options.survey.string()},
+                         "holds " + std::to_string(part.scans.size()) + " scans, but " + state_path.string() +
+                             " matched " + std::to_string(k),
+                         InputProblem::kInconsistentSurvey);
+      }
+      arena.execute([&] {
+        for (std::size_t i = 0; i < k; ++i) {
+          if (part.scans[i].name != state.result.scans[i].name) {
+            throw InputError(FileLocation{part.scans[i].source_path},
+                             "is not " + state.result.scans[i].name + ", which " + state_path.string() +
+                                 " matched in its place",
+                             InputProblem::kInconsistentSurvey);
+          }
+          live.restore(part.scans[i], state.result.scans[i]);
+          sources.push_back(part.scans[i].source_path);
+        }
+      });
+      live.restore_queue(state.queue);
+      MappingResult& counters = live.result();
+      counters.step1_icp_iterations = state.result.step1_icp_iterations;
+      counters.step3_icp_iterations = state.result.step3_icp_iterations;
+      counters.relaxation_matches = state.result.relaxation_matches;
+      counters.notes = state.result.notes;
+      counters.times = state.result.times;
+    }
+    if (!options.quiet) std::printf("resumed from %s: %zu scans matched before\n", state_path.c_str(), k);
+  }
+
+  if (!options.quiet) {
+    std::printf("watching %s (backend: %s); Ctrl-C finishes the map, a second Ctrl-C stops at once\n",
+                options.survey.c_str(), run.backend.message.c_str());
+    std::fflush(stdout);
+  }
+  auto last_arrival = std::chrono::steady_clock::now();
+  const auto enough = [&] { return watch.stop_after_scans > 0 && live.size() >= watch.stop_after_scans; };
+  while (g_interrupted == 0 && !enough()) {
+    const std::vector<std::string> names = io::ready_scan_names(options.survey);
+    for (std::size_t i = 0; i < std::min(names.size(), live.size()); ++i) {
+      if (names[i] != live.result().scans[i].name) {
+        throw InputError(FileLocation{(options.survey / names[i]).string()},
+                         "arrived after " + live.result().scans[i].name + " was matched in its place: scans must "
+                         "arrive in the order of their names",
+                         InputProblem::kInconsistentSurvey);
+      }
+    }
+    bool added = false;
+    while (live.size() < names.size() && g_interrupted == 0 && !enough()) {
+      const auto start = std::chrono::steady_clock::now();
+      io::Survey part = read_scans(live.size(), 1);
+      const double read_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      arena.execute([&] { live.add(part.scans.front()); });
+      sources.push_back(part.scans.front().source_path);
+      if (g_interrupted >= 2) break;
+      const auto written = std::chrono::steady_clock::now();
+      write_snapshot(live.result());
+      write_state(live.result(), false);
+      const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - written).count();
+      if (!options.quiet) {
+        const ScanOutcome& scan = live.result().scans.back();
+        std::printf("%s: read %.2f s, matched %.2f s, outputs %.2f s (%zu scans)%s%s\n", scan.name.c_str(), read_s,
+                    scan.match_s, write_s, live.size(), scan.health.doubtful() ? "; doubtful: " : "",
+                    scan.health.doubtful() ? scan.health.doubt.c_str() : "");
+        std::fflush(stdout);
+      }
+      added = true;
+      last_arrival = std::chrono::steady_clock::now();
+    }
+    if (g_interrupted != 0 || enough()) break;
+    if (!added && watch.idle_timeout_s > 0 &&
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - last_arrival).count() >= watch.idle_timeout_s) {
+      break;
+    }
+    for (int slept = 0; slept < watch.poll_ms && g_interrupted == 0; slept += 20) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+  }
+  if (g_interrupted >= 2) {
+    std::fprintf(stderr, "minemap: stopped: %s holds the map of the %zu scans matched before (not finished)\n",
+                 options.out.c_str(), live.size());
+    return exit_code(ExitCode::kInterrupted);
+  }
+  if (live.size() == 0) {
+    std::fprintf(stderr, "minemap: no complete scan arrived in %s: nothing written\n", options.survey.c_str());
+    return exit_code(ExitCode::kEmptyInput);
+  }
+  // Finish as `map` does; the state keeps the unfinished run, which later scans continue.
+  const MappingResult unfinished = live.result();
+  if (!options.quiet) std::printf("finishing the map of %zu scans\n", live.size());
+  arena.execute([&] { live.finish(); });
+  if (live.result().interrupted) {
+    std::fprintf(stderr, "minemap: stopped while finishing: %s holds the map of the %zu scans matched before\n",
+                 options.out.c_str(), live.size());
+    return exit_code(ExitCode::kInterrupted);
+  }
+  run.result = live.result();
+  run.survey_scans = run.result.scans.size();
+  if (run.survey.truth_cm && run.survey.truth_cm->size() != run.result.scans.size()) run.survey.truth_cm.reset();
+  write_outputs(command, run, hooks.extra_outputs);
+  write_state(unfinished, true);
+  if (!options.quiet) {
+    if (auto comparison = compare_with_truth(run.result, run.survey.truth_cm)) {
+      const double unit_per_cm = 1.0 / centimetres_per(run.survey.unit);
+      std::printf("pose error against the reference poses (relative to the first scan):\n");
+      print_errors("odometry", comparison->odometry, unit_per_cm, to_string(run.survey.unit));
+      print_errors("registered", comparison->registered, unit_per_cm, to_string(run.survey.unit));
+    }
+    std::printf("wrote the finished map of %zu scans to %s\n", live.size(), options.out.c_str());
+  }
+  return verdict(options, run.result, sources);
 }
 
 }  // namespace
@@ -509,6 +755,25 @@ int run(const std::vector<std::string>& args, const Hooks& hooks) {
   map_cmd->add_option("--out", map.options.out, "Output folder")->required();
   add_map_options(*map_cmd, map);
 
+  MapCommand watch = map;  // its own copy: CLI11 binds each subcommand's options to their targets
+  WatchOptions watch_options;
+  auto* watch_cmd = app.add_subcommand("watch", "Map a survey folder while its scans arrive (live mapping)");
+  watch_cmd->footer(
+      "Each new scan is matched and every output rewritten (atomically, file by file). Ctrl-C finishes the map:\n"
+      "the outputs are then those of `map` of the folder. A second Ctrl-C stops at once. A restart resumes from\n"
+      "OUT/watch.json. A uos scan is complete when its .pose file exists; other formats: write each file under a\n"
+      "temporary name (a leading '.', or .part) and rename it. Scans must arrive in the order of their names.");
+  watch_cmd->add_option("survey", watch.options.survey, "Survey folder the scans arrive in (uos, pcd, ply or kitti)")
+      ->required();
+  watch_cmd->add_option("--out", watch.options.out, "Output folder")->required();
+  watch_cmd->add_option("--scans", watch_options.stop_after_scans, "Finish once this many scans are matched (0: on Ctrl-C)");
+  watch_cmd->add_option("--idle-timeout-s", watch_options.idle_timeout_s,
+                        "Finish after this many seconds without a new scan (0: never)");
+  watch_cmd->add_option("--poll-ms", watch_options.poll_ms, "How often the folder is looked at (milliseconds)")
+      ->capture_default_str()
+      ->check(CLI::Range(10, 60000));
+  add_map_options(*watch_cmd, watch);
+
   try {
     std::vector<std::string> reversed(args.rbegin(), args.rend());
     app.parse(reversed);
@@ -517,13 +782,20 @@ int run(const std::vector<std::string>& args, const Hooks& hooks) {
   }
   // `map` stops at a scan boundary on Ctrl-C (SIGINT) or SIGTERM; other commands die as usual.
   std::optional<InterruptHandlers> handlers;
-  if (*map_cmd) handlers.emplace();
+  if (*map_cmd || *watch_cmd) handlers.emplace();
   try {
     if (*simulate) {
       const int max_threads = tbb::info::default_concurrency();
       const int threads = map.options.threads;
       tbb::task_arena arena(threads > 0 ? std::min(threads, max_threads) : max_threads);
       return arena.execute([&] { return run_simulate(sim); });
+    }
+    if (*watch_cmd) {
+      // Process-wide options given before the subcommand.
+      if (watch.options.threads == 0) watch.options.threads = map.options.threads;
+      if (watch.options.opencl_device.empty()) watch.options.opencl_device = map.options.opencl_device;
+      finish_settings(watch);
+      return run_watch(watch, watch_options, mapping_options_text(*watch_cmd), hooks);
     }
     finish_settings(map);
     return run_map(map, hooks);

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <span>
 #include <string>
@@ -140,6 +141,12 @@ struct SurveyReadSettings {
   /// Reference poses for the error report, one per scan in survey order (any survey; replaces
   /// truth/ or graph.txt). Same formats and unit as initial_poses.
   std::optional<fs::path> reference_poses;
+  /// Only these scans of the folder, in natural order: [first_scan, first_scan + max_scans) (for
+  /// `minemap watch`, which reads scans as they arrive). Pose files (initial_poses, reference_poses,
+  /// KITTI's graph.txt) are then indexed by a scan's place in the whole folder and must reach the
+  /// range's end. Not for LAS/LAZ and E57 surveys.
+  std::size_t first_scan = 0;
+  std::size_t max_scans = std::numeric_limits<std::size_t>::max();
 };
 
 /// A survey loaded from a folder.
@@ -174,6 +181,13 @@ inline constexpr std::size_t kUnitCheckMinPoints = 100;
 /// same number or the same points (kInconsistentSurvey), the units check (kSuspiciousUnits). Gaps in
 /// the numbering and dropped NaN points are Survey::warnings.
 Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings = {});
+
+/// The names of a survey folder's complete scans, from the first in natural order (Scan::name, as
+/// read_survey names them): uos, a `scanNNN.3d` is complete once its `scanNNN.pose` exists (a
+/// scanner writes the pose file last); the other layouts, every scan file under its final name (write
+/// it under a temporary name, a leading '.' or a suffix such as `.part`, then rename it). Empty for
+/// LAS/LAZ and E57 surveys.
+std::vector<std::string> ready_scan_names(const fs::path& dir);
 
 /// Surveys read outside the C++ core: LAS/LAZ (a folder of .las/.laz files) and E57 (an .e57 file,
 /// or a folder of them). Their readers are the Python package's (python/minemap/formats.py, on

@@ -29,6 +29,7 @@
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <limits>
 #include <map>
 #include <string>
 #include <system_error>
@@ -144,9 +145,20 @@ Pose in_3dtk_frame(const Pose& pose_cm, const ReadSettings& settings) {
   return settings.right_handed_to_3dtk ? right_handed_pose_to_3dtk(pose_cm, 1.0) : pose_cm;
 }
 
+/// One pose per scan of the survey; with a scan range (SurveyReadSettings::first_scan, max_scans),
+/// the file covers the folder's scans up to the range's end, and the range's poses are returned.
 std::vector<Pose> read_pose_list(const fs::path& path, LengthUnit unit, std::size_t expected_count,
-                                 const ReadSettings& settings) {
+                                 const ReadSettings& settings, std::size_t first_scan = 0, bool ranged = false) {
   std::vector<Pose> poses = read_trajectory(path, unit);
+  if (ranged && poses.size() >= first_scan + expected_count) {
+    poses = std::vector<Pose>(poses.begin() + static_cast<std::ptrdiff_t>(first_scan),
+                              poses.begin() + static_cast<std::ptrdiff_t>(first_scan + expected_count));
+  } else if (ranged) {
+    detail::fail_in_file(path.string(),
+                         "has " + std::to_string(poses.size()) + " poses, the survey's scans so far need " +
+                             std::to_string(first_scan + expected_count),
+                         InputProblem::kInconsistentSurvey);
+  }
   if (poses.size() != expected_count) {
     detail::fail_in_file(path.string(),
                          "has " + std::to_string(poses.size()) + " poses, the survey has " +
@@ -397,9 +409,33 @@ std::string describe_dropped(const DroppedPoints& dropped) {
 
 namespace {
 /// The layouts read here: uos, PCD, PLY, KITTI.
+bool ranged(const SurveyReadSettings& settings) {
+  return settings.first_scan > 0 || settings.max_scans != std::numeric_limits<std::size_t>::max();
+}
+
+/// Keeps the scans of SurveyReadSettings' range (natural order), each layout's list alike.
+void keep_range(FolderContent& content, const SurveyReadSettings& settings) {
+  if (!ranged(settings)) return;
+  const auto in_range = [&](std::size_t k) { return k >= settings.first_scan && k - settings.first_scan < settings.max_scans; };
+  std::map<std::uint64_t, fs::path> uos;
+  std::size_t k = 0;
+  for (auto& entry : content.uos) {
+    if (in_range(k++)) uos.insert(entry);
+  }
+  content.uos = std::move(uos);
+  for (auto* list : {&content.pcd, &content.ply, &content.kitti_bin, &content.kitti_xyz_dirs}) {
+    std::vector<fs::path> kept;
+    for (std::size_t j = 0; j < list->size(); ++j) {
+      if (in_range(j)) kept.push_back((*list)[j]);
+    }
+    *list = std::move(kept);
+  }
+}
+
 void read_native_survey(const fs::path& dir, const SurveyReadSettings& settings, Survey& survey, DroppedPoints& dropped,
                         std::vector<std::uint64_t>& numbers, std::string (*&name_of)(std::uint64_t)) {
-  const FolderContent content = list_folder(dir);
+  FolderContent content = list_folder(dir);
+  keep_range(content, settings);
   const int layouts = !content.uos.empty() + !content.pcd.empty() + !content.ply.empty() +
                       !content.kitti_bin.empty() + !content.kitti_xyz_dirs.empty();
   if (layouts == 0) {
@@ -454,7 +490,9 @@ void read_native_survey(const fs::path& dir, const SurveyReadSettings& settings,
     // Both KITTI layouts in one folder would interleave; numbers are only meaningful for one.
     if (!content.kitti_bin.empty() && !content.kitti_xyz_dirs.empty()) numbers.clear();
     const fs::path graph = dir / "graph.txt";
-    if (fs::exists(graph)) survey.truth_cm = read_pose_list(graph, survey.unit, survey.scans.size(), read);
+    if (fs::exists(graph)) {
+      survey.truth_cm = read_pose_list(graph, survey.unit, survey.scans.size(), read, settings.first_scan, ranged(settings));
+    }
   }
 }
 }  // namespace
@@ -503,6 +541,22 @@ bool is_foreign_survey(const fs::path& path) {
   return foreign;
 }
 
+std::vector<std::string> ready_scan_names(const fs::path& dir) {
+  std::error_code error;
+  if (!fs::is_directory(dir, error) || is_foreign_survey(dir)) return {};
+  const FolderContent content = list_folder(dir);
+  std::vector<std::string> names;
+  for (const auto& entry : content.uos) {
+    if (!fs::exists(fs::path(entry.second).replace_extension(".pose"), error)) break;
+    names.push_back(entry.second.stem().string());
+  }
+  for (const auto* list : {&content.pcd, &content.ply, &content.kitti_bin}) {
+    for (const fs::path& path : *list) names.push_back(path.stem().string());
+  }
+  for (const fs::path& folder : content.kitti_xyz_dirs) names.push_back(folder.filename().string());
+  return names;
+}
+
 Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
   if (settings.initial_poses) {
     std::error_code error;
@@ -522,11 +576,13 @@ Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
     read_native_survey(dir, settings, survey, dropped, numbers, name_of);
   }
   if (settings.initial_poses) {
-    const std::vector<Pose> poses = read_pose_list(*settings.initial_poses, survey.unit, survey.scans.size(), read);
+    const std::vector<Pose> poses = read_pose_list(*settings.initial_poses, survey.unit, survey.scans.size(), read,
+                                                   settings.first_scan, ranged(settings));
     for (std::size_t i = 0; i < poses.size(); ++i) survey.scans[i].pose_cm = poses[i];
   }
   if (settings.reference_poses) {
-    survey.truth_cm = read_pose_list(*settings.reference_poses, survey.unit, survey.scans.size(), read);
+    survey.truth_cm = read_pose_list(*settings.reference_poses, survey.unit, survey.scans.size(), read,
+                                     settings.first_scan, ranged(settings));
   }
 
   // The survey as a whole, now that every file parsed.

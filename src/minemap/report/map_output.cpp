@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "minemap/core/atomic_file.hpp"
+#include "minemap/report/map_html.hpp"
 #include "minemap/report/map_views.hpp"
 
 namespace minemap {
@@ -159,6 +160,8 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
 
   std::vector<io::TimedPose> trajectory;
   std::vector<Eigen::Vector3f> map_points;
+  std::vector<std::uint32_t> map_point_scans;  // each map point's scan: map.html colours by scan
+  std::vector<report::MapHtmlScan> html_scans;
   std::vector<Eigen::Vector3d> positions, reference_positions;
   // Files that do not depend on each other are written in parallel (each one atomically); the
   // first failure propagates as it would from a serial loop.
@@ -174,6 +177,17 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
     const Eigen::Matrix3d r = scan.world_from_points.block<3, 3>(0, 0);
     const Eigen::Vector3d t = scan.world_from_points.block<3, 1>(0, 3);
     for (const auto& p : scan.used_points_cm) map_points.push_back((r * p.cast<double>() + t).cast<float>());
+    map_point_scans.resize(map_points.size(), static_cast<std::uint32_t>(i));
+    // map.html's info box: why a registered scan's match is doubtful, or why an unregistered one failed.
+    html_scans.push_back({.name = scan.name,
+                          .position_cm = positions.back(),
+                          .iterations = scan.last_match.iterations(),
+                          .pairs = scan.last_match.pairs,
+                          .rms_cm = scan.last_match.rms_cm,
+                          .registered = scan.registered,
+                          .doubt = !scan.registered         ? scan.failure
+                                   : scan.health.doubtful() ? scan.health.doubt
+                                                            : ""});
   }
   if (truth_cm && truth_cm->size() == result.scans.size()) {
     // Reference trajectory expressed in the master scan's frame, as the registered one is.
@@ -184,13 +198,18 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
   view.up_axis = output.up_axis;
   view.title = output.title;
   const report::MapViewInput input{map_points, positions, reference_positions};
+  report::MapHtmlSettings html;
+  html.up_axis = output.up_axis;
+  html.unit = output.unit;
+  html.title = output.title;
   tbb::parallel_invoke(
       [&] {
         io::write_tum(out_dir / "trajectory.tum", trajectory, output.unit);
         io::write_ply(out_dir / "map.ply", map_points, true, output.unit);
       },
       [&] { report::write_top_view_png(out_dir / "top.png", input, view); },
-      [&] { report::write_side_view_png(out_dir / "side.png", input, view); });
+      [&] { report::write_side_view_png(out_dir / "side.png", input, view); },
+      [&] { report::write_map_html(out_dir / "map.html", {map_points, map_point_scans, html_scans}, html); });
 
   const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const std::string text = map_report(result, truth_cm, settings, output, write_s);

@@ -1,7 +1,8 @@
 #pragma once
 // Writes what `minemap map` produces: per scan 3DTK-compatible `.frames` and `.pose`, the
-// trajectory as TUM, the merged reduced map as PLY, report.json, and the paper's Fig. 6 views
-// (top.png, side.png). Every file is written atomically (temp file + rename).
+// trajectory as TUM, the merged reduced map as PLY, report.json, the paper's Fig. 6 views
+// (top.png, side.png) and map.html, a 3D view for a browser. Every file is written atomically
+// (temp file + rename).
 #include <filesystem>
 #include <optional>
 #include <string>
