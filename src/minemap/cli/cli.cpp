@@ -327,6 +327,30 @@ void print_survey(const MapOptions& options, const MapRun& run) {
   std::printf("backend: %s\n", run.backend.message.c_str());
 }
 
+/// Names each scan that could not be registered on stderr (with its file: sources[i]); true when
+/// there is none.
+bool say_unregistered(const MappingResult& result, const std::vector<std::string>& sources) {
+  bool all = true;
+  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+    const ScanOutcome& s = result.scans[i];
+    if (s.registered) continue;
+    all = false;
+    std::fprintf(stderr, "minemap: %s: scan %s not registered: %s\n", sources[i].c_str(), s.name.c_str(),
+                 s.failure.c_str());
+  }
+  return all;
+}
+
+/// Names each registered scan whose match was judged doubtful on stderr; returns their indices.
+std::vector<std::size_t> say_doubtful(const MappingResult& result, const std::vector<std::string>& sources) {
+  const std::vector<std::size_t> doubtful = result.doubtful();
+  for (const std::size_t i : doubtful) {
+    std::fprintf(stderr, "minemap: %s: scan %s registered, but doubtful: %s\n", sources[i].c_str(),
+                 result.scans[i].name.c_str(), result.scans[i].health.doubt.c_str());
+  }
+  return doubtful;
+}
+
 int run_map(const MapCommand& command, const Hooks& hooks) {
   const MapOptions& options = command.options;
   ProgressBar bar(!options.quiet);
@@ -343,14 +367,10 @@ int run_map(const MapCommand& command, const Hooks& hooks) {
   // A scan that could not be registered (no overlap, too few pairs) makes the map untrustworthy:
   // by default nothing is written and the output folder stays as it was, as for bad input.
   // --write-unregistered writes the outputs anyway, the scan at its odometry pose, for inspection.
-  const bool failed = !result.all_registered();
+  std::vector<std::string> sources;
+  for (const Scan& scan : run.survey.scans) sources.push_back(scan.source_path);
+  const bool failed = !say_unregistered(result, sources);
   if (failed) {
-    for (std::size_t i = 0; i < result.scans.size(); ++i) {
-      const ScanOutcome& s = result.scans[i];
-      if (s.registered) continue;
-      std::fprintf(stderr, "minemap: %s: scan %s not registered: %s\n", run.survey.scans[i].source_path.c_str(),
-                   s.name.c_str(), s.failure.c_str());
-    }
     if (!options.write_unregistered) {
       std::fprintf(stderr,
                    "minemap: nothing was written to %s; --write-unregistered writes the map with these scans at "
@@ -361,12 +381,7 @@ int run_map(const MapCommand& command, const Hooks& hooks) {
   }
 
   // Registered but judged doubtful (registration/health.hpp): written, named, and a distinct exit code.
-  const std::vector<std::size_t> doubtful = result.doubtful();
-  for (const std::size_t i : doubtful) {
-    std::fprintf(stderr, "minemap: %s: scan %s registered, but doubtful: %s\n",
-                 run.survey.scans[i].source_path.c_str(), result.scans[i].name.c_str(),
-                 result.scans[i].health.doubt.c_str());
-  }
+  const std::vector<std::size_t> doubtful = say_doubtful(result, sources);
   write_outputs(command, run, hooks.extra_outputs);
   if (result.interrupted) {
     std::fprintf(stderr, "minemap: interrupted: wrote the %zu of %zu scans matched so far to %s (report.json: partial)\n",
@@ -420,22 +435,12 @@ int run_map(const MapCommand& command, const Hooks& hooks) {
   return 0;
 }
 
-/// The exit code of a finished map, with the messages `map` prints (unregistered, doubtful).
+/// The exit code of a finished watch, with the messages `map` prints (unregistered, doubtful).
 int verdict(const MapOptions& options, const MappingResult& result, const std::vector<std::string>& sources) {
-  bool failed = false;
-  for (std::size_t i = 0; i < result.scans.size(); ++i) {
-    if (result.scans[i].registered) continue;
-    failed = true;
-    std::fprintf(stderr, "minemap: %s: scan %s not registered: %s\n", sources[i].c_str(),
-                 result.scans[i].name.c_str(), result.scans[i].failure.c_str());
-  }
-  const std::vector<std::size_t> doubtful = result.doubtful();
-  for (const std::size_t i : doubtful) {
-    std::fprintf(stderr, "minemap: %s: scan %s registered, but doubtful: %s\n", sources[i].c_str(),
-                 result.scans[i].name.c_str(), result.scans[i].health.doubt.c_str());
-  }
+  const bool failed = !say_unregistered(result, sources);
+  const bool doubtful = !say_doubtful(result, sources).empty();
   if (failed) return exit_code(ExitCode::kRegistrationFailed);
-  if (!doubtful.empty() && !options.accept_doubtful) return exit_code(ExitCode::kDoubtfulMap);
+  if (doubtful && !options.accept_doubtful) return exit_code(ExitCode::kDoubtfulMap);
   return 0;
 }
 
