@@ -28,6 +28,7 @@ import numpy as np
 
 from . import _core, formats
 from ._core import BackendError, InputError, OutputError
+from .batch import batch  # many surveys on a Dask cluster; dask is imported only when it runs
 
 __all__ = ["register", "map_survey", "read_survey", "simulate", "batch", "options", "RegistrationResult",
            "MappingResult", "Survey", "InputError", "BackendError", "OutputError", "formats"]
@@ -191,12 +192,6 @@ def simulate(out, *, scans: int | None = None, seed: int | None = None, loop: fl
     if code != 0:
         raise RuntimeError(f"minemap simulate exited {code}")
     return Path(out)
-
-
-def batch(surveys, out, **kwargs):
-    """Maps many surveys on a Dask cluster (minemap.batch.batch; needs dask.distributed)."""
-    from .batch import batch as run_batch
-    return run_batch(surveys, out, **kwargs)
 
 
 # ---- the outputs the C++ core leaves to the package: map.laz, and the poses back into E57 -------------
