@@ -1,6 +1,7 @@
 """Shared fixtures: the C++ command line the package is compared with, and a small simulated survey."""
 import os
 import shutil
+import signal
 import subprocess
 from pathlib import Path
 
@@ -40,3 +41,19 @@ def fresh_copy(tmp_path, small_survey):
         shutil.copytree(small_survey, target)
         return target
     return make
+
+
+def default_sigint():
+    """preexec_fn for a child a test interrupts: SIGINT back to its default. A shell starts background
+    jobs (`scripts/test.sh &`, nohup) with SIGINT ignored, children inherit that, and Python then
+    installs no KeyboardInterrupt handler at all."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+@pytest.fixture()
+def python_sigint():
+    """Python's own SIGINT handler (KeyboardInterrupt) in this process for the test, whatever the
+    shell that started pytest left (see default_sigint)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import run_cli
+from conftest import default_sigint, run_cli
 from distributed import Client, LocalCluster
 
 from minemap.batch import batch, main
@@ -170,7 +170,7 @@ def test_ctrl_c_stops_everything_and_keeps_finished_surveys(surveys, tmp_path):
     # Its own process group, signalled whole as a terminal's Ctrl-C is: batch, workers, mappers.
     proc = subprocess.Popen([sys.executable, "-m", "minemap", "batch", *map(str, surveys),
                              "--out", str(out), "--workers", "2", "--no-progress"],
-                            env=env, start_new_session=True, stderr=subprocess.DEVNULL)
+                            env=env, start_new_session=True, stderr=subprocess.DEVNULL, preexec_fn=default_sigint)
     deadline = time.monotonic() + 60
     while not (out.is_dir() and any((d / "report.json").exists() for d in out.iterdir())):
         assert proc.poll() is None and time.monotonic() < deadline

@@ -16,7 +16,7 @@ import pye57
 import pytest
 
 import minemap
-from conftest import run_cli
+from conftest import default_sigint, run_cli
 
 TIMING_KEYS = ("timings_s",)  # the only report fields that differ between two runs of one survey
 
@@ -219,7 +219,7 @@ def test_no_copy_of_a_large_input_array():
     assert peak < 1_000_000, peak
 
 
-def test_ctrl_c_stops_between_scans_and_keeps_what_was_matched(tmp_path):
+def test_ctrl_c_stops_between_scans_and_keeps_what_was_matched(tmp_path, python_sigint):
     survey = minemap.simulate(tmp_path / "survey", scans=40, seed=5)
     timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
     timer.start()
@@ -236,7 +236,8 @@ def test_ctrl_c_stops_between_scans_and_keeps_what_was_matched(tmp_path):
 def test_python_command_line_interrupt_exits_130(tmp_path):
     survey = minemap.simulate(tmp_path / "survey", scans=40, seed=5)
     process = subprocess.Popen([sys.executable, "-m", "minemap", "map", str(survey), "--out", str(tmp_path / "out"),
-                                "--mode", "simultaneous", "--quiet"], stderr=subprocess.PIPE, text=True)
+                                "--mode", "simultaneous", "--quiet"], stderr=subprocess.PIPE, text=True,
+                               preexec_fn=default_sigint)
     time.sleep(2.0)
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=60)
