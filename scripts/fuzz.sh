@@ -2,7 +2,7 @@
 # Fuzzes minemap's file readers with libFuzzer.
 #
 # Builds the tests/fuzz/fuzz_*.cpp targets with clang, AddressSanitizer and UndefinedBehaviorSanitizer
-# (only those targets and the library they need), then runs each for FUZZ_SECONDS seconds (default 10)
+# (only those targets and the library they need), then runs each for FUZZ_SECONDS seconds (default 5)
 # on a scratch copy of its seed corpus tests/fuzz/corpus/<name>, so the repository is never written
 # to. Fails when any target crashes, leaks, trips a sanitizer, times out or runs out of memory; the
 # input that did it is kept under $FUZZ_BUILD_DIR/artifacts/<name>/ and named in the output.
@@ -12,14 +12,14 @@
 #            trajectory); default: all of tests/fuzz/fuzz_*.cpp
 #   --merge  afterwards, merge inputs that reach new code into tests/fuzz/corpus/<name>
 #            (libFuzzer -merge=1, which adds only what increases coverage)
-# environment: FUZZ_SECONDS (10), FUZZ_BUILD_DIR (build-fuzz), FUZZ_CXX (clang++), FUZZ_JOBS (nproc),
+# environment: FUZZ_SECONDS (5), FUZZ_BUILD_DIR (build-fuzz), FUZZ_CXX (clang++), FUZZ_JOBS (nproc),
 #              TMPDIR (default /dev/shm when writable)
 set -euo pipefail
 
 repo_root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$repo_root"
 
-seconds="${FUZZ_SECONDS:-10}"
+seconds="${FUZZ_SECONDS:-5}"
 build_dir="${FUZZ_BUILD_DIR:-build-fuzz}"
 cxx="${FUZZ_CXX:-clang++}"
 jobs="${FUZZ_JOBS:-$(nproc)}"

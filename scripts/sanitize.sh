@@ -23,6 +23,12 @@
 # the paper's queue: MappingDeterminism, Presets/*), HealthRealData.CarScans... (the health checks
 # and retries: HealthSurveys.*, Health.*), MappingLoops.ALoopSurveyIsClosedAndItsEndsAgree (loop
 # closing: Cli.ALoopSurveyIsClosedAndReported, PoseGraph.*).
+# Also out, to keep CI under 30 minutes (each 17-46 s under a sanitizer), their code covered there
+# by smaller tests: LiveMapper.* (the live matcher against map_survey in three modes: its code runs
+# in Cli.WatchEndsAsMapOfTheSameFolderAndResumes), Cli.UnmarkedUosFilesGetTheirSlicesFromTheScanner-
+# Order (slice detection: UosPoints.UnmarkedScannerOrderedFilesGetTheirSlicesBack), install_and_find_package (packaging, no memory or
+# thread question); under TSan only, BadInput.MapCommandGivesEachCase... (single-threaded parsers
+# run through the CLI; ASan runs it).
 # Label "viewer" (the map.html page in headless Chromium) stays out too: Chromium is not
 # instrumented, and the page's C++ runs here in test_map_html.
 # Every other test runs under both sanitizers.
@@ -60,7 +66,9 @@ cc="${cxx/clang++/clang}"; cc="${cc/g++/gcc}"
 jobs="${SANITIZE_JOBS:-$(nproc)}"
 timeout="${SANITIZE_TIMEOUT:-900}"
 supp="$repo_root/tests/sanitizers"
-heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBound|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree)$'
+heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBound|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|LiveMapper\..*|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package)$'
+# TSan only: runs of the single-threaded parsers through the CLI (ASan checks them).
+heavy_thread='^(BadInput\.MapCommandGivesEachCaseItsExitCodeAndLeavesTheOutputFolder)$'
 
 # Builds oneTBB with -fsanitize=thread into $1/install once; prints its TBB_DIR.
 tsan_tbb() {
@@ -153,7 +161,9 @@ run_one() {
   (
     cd "$build_dir"
     sanitizer_environment "$sanitizer" "$reports"
-    ctest --output-on-failure -j"$jobs" --timeout "$timeout" -E "$heavy" -LE 'long|viewer' "$@"
+    exclude="$heavy"
+    [ "$sanitizer" = thread ] && exclude="${heavy%)\$}|${heavy_thread#^(}"
+    ctest --output-on-failure -j"$jobs" --timeout "$timeout" -E "$exclude" -LE 'long|viewer' "$@"
   ) || status=$?
   local found=() noise=()
   for report in "$reports"/*; do

@@ -51,7 +51,7 @@ if [ "${SANITIZERS:-1}" != "0" ]; then
   # The fuzz targets need the same library build (clang, address+undefined, RelWithDebInfo): reuse it.
   fuzz_build_dir=build-asan
 fi
-if [ "${FUZZ_SECONDS:-10}" != "0" ]; then
-  stage "libFuzzer, ${FUZZ_SECONDS:-10} s per parser"
+if [ "${FUZZ_SECONDS:-5}" != "0" ]; then
+  stage "libFuzzer, ${FUZZ_SECONDS:-5} s per parser"
   FUZZ_BUILD_DIR="$fuzz_build_dir" scripts/fuzz.sh
 fi
