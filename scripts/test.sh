@@ -18,7 +18,9 @@ jobs="$(nproc)"
 # The Python package's build and test tools, pinned, in a virtualenv inside the build folder (Debian's
 # Python refuses pip installs outside one, PEP 668).
 stage "Python virtualenv build/venv (python/requirements-test.txt from PyPI)"
-[ -x build/venv/bin/python ] || python3 -m venv build/venv
+# Debian's Python (python3-dev, python3-venv: install-deps.sh), not whichever python3 is first on
+# PATH (a pyenv's headers would come from no package: check-deps.sh refuses them).
+[ -x build/venv/bin/python ] || /usr/bin/python3 -m venv build/venv
 # pip trusts the system's certificate authorities (ca-certificates, and what the administrator added:
 # a proxy's), not only its own copy of Mozilla's.
 if [ -z "${PIP_CERT:-}" ] && [ -f /etc/ssl/certs/ca-certificates.crt ]; then export PIP_CERT=/etc/ssl/certs/ca-certificates.crt; fi
