@@ -463,16 +463,13 @@ int run_watch(const MapCommand& command, const WatchOptions& watch, const std::s
     throw InputError(FileLocation{options.survey.string()},
                      "watch reads uos, PCD, PLY and KITTI folders; map LAS/LAZ and E57 surveys with `map`");
   }
-  BackendOptions backend_options = backend_options_from_environment(options.backend);
-  if (!options.opencl_device.empty()) backend_options.opencl.device = options.opencl_device;
   MapRun run;  // the outputs' view: the survey's unit, format and truth, no points
-  run.backend = make_backend(backend_options);
+  run.backend = make_backend_for(options);
   const auto hard_stop = [&] { return g_interrupted >= 2 || (hooks.stop_requested && hooks.stop_requested()); };
   LiveMapper live(command.settings, *run.backend.backend, hard_stop);
   std::vector<std::string> sources;
   const fs::path state_path = options.out / "watch.json";
-  const int max_threads = tbb::info::default_concurrency();
-  tbb::task_arena arena(options.threads > 0 ? std::min(options.threads, max_threads) : max_threads);
+  tbb::task_arena arena(thread_count(options));
 
   // Reads scans [first, first + count) of the folder as `map` reads them (unit, poses, truth).
   const auto read_scans = [&](std::size_t first, std::size_t count) {
@@ -639,6 +636,17 @@ int run_watch(const MapCommand& command, const WatchOptions& watch, const std::s
 
 }  // namespace
 
+BackendChoice make_backend_for(const MapOptions& options) {
+  BackendOptions backend_options = backend_options_from_environment(options.backend);
+  if (!options.opencl_device.empty()) backend_options.opencl.device = options.opencl_device;
+  return make_backend(backend_options);
+}
+
+int thread_count(const MapOptions& options) {
+  const int max_threads = tbb::info::default_concurrency();
+  return options.threads > 0 ? std::min(options.threads, max_threads) : max_threads;
+}
+
 io::SurveyReadSettings survey_read_settings(const MapOptions& options) {
   io::SurveyReadSettings read;
   if (!options.unit.empty()) read.read.unit = parse_length_unit(options.unit);
@@ -690,12 +698,9 @@ MapRun run_map_command(const MapCommand& command, const ProgressCallback& progre
   run.survey = io::read_survey(options.survey, survey_read_settings(options));
   run.load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   // The composition root: the backend is made here, from the options and the environment.
-  BackendOptions backend_options = backend_options_from_environment(options.backend);
-  if (!options.opencl_device.empty()) backend_options.opencl.device = options.opencl_device;
-  run.backend = make_backend(backend_options);
+  run.backend = make_backend_for(options);
   if (!options.quiet) print_survey(options, run);
-  const int max_threads = tbb::info::default_concurrency();
-  tbb::task_arena arena(options.threads > 0 ? std::min(options.threads, max_threads) : max_threads);
+  tbb::task_arena arena(thread_count(options));
   run.result = arena.execute(
       [&] { return map_survey(run.survey.scans, command.settings, *run.backend.backend, progress, stop_requested); });
   run.survey_scans = run.result.scans.size();
@@ -716,8 +721,7 @@ std::string write_outputs(const MapCommand& command, MapRun& run, const ExtraOut
   output.backend_choice = run.backend.message;
   output.survey_scans = run.survey_scans;
   output.origin_cm = run.survey.origin_cm;
-  const int max_threads = tbb::info::default_concurrency();
-  tbb::task_arena arena(options.threads > 0 ? std::min(options.threads, max_threads) : max_threads);
+  tbb::task_arena arena(thread_count(options));
   const SignalsBlocked no_interrupts_while_writing;
   return arena.execute([&] {
     std::string report = write_map_outputs(options.out, run.result, run.survey.truth_cm, command.settings, output);
@@ -790,9 +794,7 @@ int run(const std::vector<std::string>& args, const Hooks& hooks) {
   if (*map_cmd || *watch_cmd) handlers.emplace();
   try {
     if (*simulate) {
-      const int max_threads = tbb::info::default_concurrency();
-      const int threads = map.options.threads;
-      tbb::task_arena arena(threads > 0 ? std::min(threads, max_threads) : max_threads);
+      tbb::task_arena arena(thread_count(map.options));
       return arena.execute([&] { return run_simulate(sim); });
     }
     if (*watch_cmd) {

@@ -64,6 +64,13 @@ struct OptionInfo {
 /// Every option parse_map_options takes, with `preset`'s defaults.
 std::vector<OptionInfo> map_options(const std::string& preset = "default");
 
+/// The backend `options` ask for (--backend, --opencl-device, and the environment's
+/// MINEMAP_OPENCL*): the composition root's one way to make it.
+BackendChoice make_backend_for(const MapOptions& options);
+
+/// The worker threads `options` ask for: --threads, at most the machine's; 0 means all cores.
+int thread_count(const MapOptions& options);
+
 /// The survey reading settings `map`'s options ask for.
 io::SurveyReadSettings survey_read_settings(const MapOptions& options);
 

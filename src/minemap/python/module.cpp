@@ -13,7 +13,6 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
-#include <tbb/info.h>
 #include <tbb/task_arena.h>
 
 #include <cmath>
@@ -387,12 +386,8 @@ py::dict map_survey_api(const py::object& survey_path, const py::object& scans, 
     if (given) {
       // As run_map_command, with the survey already in memory.
       run.survey = std::move(*given);
-      BackendOptions backend_options = backend_options_from_environment(command.options.backend);
-      if (!command.options.opencl_device.empty()) backend_options.opencl.device = command.options.opencl_device;
-      run.backend = make_backend(backend_options);
-      const int max_threads = tbb::info::default_concurrency();
-      const int threads = command.options.threads;
-      tbb::task_arena arena(threads > 0 ? std::min(threads, max_threads) : max_threads);
+      run.backend = cli::make_backend_for(command.options);
+      tbb::task_arena arena(cli::thread_count(command.options));
       run.result = arena.execute(
           [&] { return map_survey(run.survey.scans, command.settings, *run.backend.backend, {}, std::ref(interrupt)); });
       run.survey_scans = run.result.scans.size();
@@ -429,12 +424,8 @@ py::dict register_api(const py::handle& source, const py::handle& target, const 
   IcpResult result;
   {
     py::gil_scoped_release no_gil;
-    BackendOptions backend_options = backend_options_from_environment(command.options.backend);
-    if (!command.options.opencl_device.empty()) backend_options.opencl.device = command.options.opencl_device;
-    BackendChoice backend = make_backend(backend_options);
-    const int max_threads = tbb::info::default_concurrency();
-    const int threads = command.options.threads;
-    tbb::task_arena arena(threads > 0 ? std::min(threads, max_threads) : max_threads);
+    BackendChoice backend = cli::make_backend_for(command.options);
+    tbb::task_arena arena(cli::thread_count(command.options));
     result = arena.execute([&] {
       const auto data_cloud = backend.backend->prepare(data.points_cm, command.settings.tree);
       const auto model_cloud = backend.backend->prepare(model.points_cm, command.settings.tree);
