@@ -236,9 +236,12 @@ def test_ctrl_c_stops_between_scans_and_keeps_what_was_matched(tmp_path, python_
 def test_python_command_line_interrupt_exits_130(tmp_path):
     survey = minemap.simulate(tmp_path / "survey", scans=40, seed=5)
     process = subprocess.Popen([sys.executable, "-m", "minemap", "map", str(survey), "--out", str(tmp_path / "out"),
-                                "--mode", "simultaneous", "--quiet"], stderr=subprocess.PIPE, text=True,
-                               preexec_fn=default_sigint)
-    time.sleep(2.0)
+                                "--mode", "simultaneous"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                               text=True, preexec_fn=default_sigint)
+    # Interrupt once it is matching (its progress lines say so), not while Python still starts up.
+    for line in process.stderr:
+        if "progress: simultaneous 3/" in line:
+            break
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=60)
     assert process.returncode == 130, stderr
