@@ -18,21 +18,9 @@ std::string lower(std::string text) {
 
 }  // namespace
 
-const char* to_string(Backend backend) {
-  switch (backend) {
-    case Backend::kAuto: return "auto";
-    case Backend::kCpu: return "cpu";
-    case Backend::kOpenCl: return "opencl";
-  }
-  return "?";
-}
+const char* to_string(Backend backend) { return name_in(kBackendNames, backend); }
 
-Backend parse_backend(const std::string& text) {
-  if (text == "auto") return Backend::kAuto;
-  if (text == "cpu") return Backend::kCpu;
-  if (text == "opencl") return Backend::kOpenCl;
-  throw std::invalid_argument("unknown backend '" + text + "' (expected auto, cpu or opencl)");
-}
+Backend parse_backend(const std::string& text) { return parse_named(kBackendNames, text, "backend"); }
 
 bool built_with_opencl() { return MINEMAP_WITH_OPENCL != 0; }
 

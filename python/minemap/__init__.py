@@ -27,10 +27,10 @@ from typing import Any, Sequence
 import numpy as np
 
 from . import _core, formats
-from ._core import BackendError, InputError, OutputError
+from ._core import BackendError, InputError, OutputError, __version__
 from .batch import batch  # many surveys on a Dask cluster; dask is imported only when it runs
 
-__all__ = ["register", "map_survey", "read_survey", "simulate", "batch", "options", "RegistrationResult",
+__all__ = ["__version__", "register", "map_survey", "read_survey", "simulate", "batch", "options", "RegistrationResult",
            "MappingResult", "Survey", "InputError", "BackendError", "OutputError", "formats"]
 
 
@@ -210,7 +210,7 @@ def _write_extra_outputs(out_dir: str, run: dict) -> None:
     metres_per_unit = 0.01 if run["unit"] == "cm" else 1.0
     points = run["map_points"] * metres_per_unit
     origin = np.asarray(run["origin"], dtype=np.float64) * metres_per_unit
-    if run["format"] == "uos":
+    if run["frame"] == "3dtk":  # uos, or --right-handed-to-3dtk: the survey's reader says (io::Survey::frame_3dtk)
         points, origin = _to_right_handed_z_up(points), _to_right_handed_z_up(origin[None, :])[0]
     formats.write_laz(out / "map.laz", points, unit="m", origin=origin, scan_index=run["map_scan_index"])
     if run["format"] == "e57" and not run["interrupted"]:  # a partial run leaves the E57 alone

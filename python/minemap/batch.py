@@ -20,8 +20,14 @@ import threading
 import time
 import uuid
 
-DOUBTFUL = 13      # `minemap map`: mapped, but a match was judged doubtful; the outputs are written
-INTERRUPTED = 130
+from . import _core
+
+# The program's exit codes, from the C++ table (cli/exit_codes.hpp): written once.
+OK = _core.exit_codes["ok"]
+INTERNAL = _core.exit_codes["internal"]  # batch: some survey failed
+USAGE = _core.exit_codes["usage"]        # batch: bad arguments
+DOUBTFUL = _core.exit_codes["doubtful_map"]  # mapped, but a match was judged doubtful; the outputs are written
+INTERRUPTED = _core.exit_codes["interrupted"]
 TAIL_LINES = 20    # lines of a failed mapper's stderr kept in batch.json and NAME.failed.txt
 
 # Mappers running on this worker, by batch run: what `_stop` kills on Ctrl-C, since cancelling a
@@ -106,10 +112,10 @@ def _map_one(survey, out, threads, map_args, command, run):
             err.append(f"killed by signal {-code}")
         record.update(exit_code=code, seconds=round(time.monotonic() - start, 3),
                       stderr=err[-TAIL_LINES:])
-        if code not in (0, DOUBTFUL):
+        if code not in (OK, DOUBTFUL):
             record["status"] = "failed"
             return record
-        record["status"] = "done" if code == 0 else "doubtful"
+        record["status"] = "done" if code == OK else "doubtful"
         try:
             os.rename(tmp, final)
         except OSError:
@@ -273,8 +279,8 @@ def exit_code(summary):
     if summary["interrupted"]:
         return INTERRUPTED
     if n["failed"]:
-        return 1
-    return DOUBTFUL if n["doubtful"] else 0
+        return INTERNAL
+    return DOUBTFUL if n["doubtful"] else OK
 
 
 def main(argv):
@@ -290,10 +296,10 @@ def main(argv):
         description="Map many surveys on a Dask cluster, one survey per task, each into\n"
                     "OUT/<survey folder name>/. Everything after -- goes to `minemap map`.",
         epilog="OUT/batch.json lists every survey: done, skipped (OUT/NAME/report.json was "
-               "there),\ndoubtful (mapped, exit 13), failed (its exit code and stderr, also in "
+               f"there),\ndoubtful (mapped, exit {DOUBTFUL}), failed (its exit code and stderr, also in "
                "OUT/NAME.failed.txt).\nRunning the same command again maps only what is not "
-               "done.\n\nexit status: 0 every survey done or skipped; 13 some doubtful, none "
-               "failed;\n1 some failed; 2 bad arguments; 130 interrupted.\n\nexample:\n"
+               f"done.\n\nexit status: {OK} every survey done or skipped; {DOUBTFUL} some doubtful, none "
+               f"failed;\n{INTERNAL} some failed; {USAGE} bad arguments; {INTERRUPTED} interrupted.\n\nexample:\n"
                "  minemap batch surveys/* --out maps --scheduler tcp://head:8786 -- --preset paper")
     parser.add_argument("surveys", nargs="+", metavar="SURVEY", help="survey folders")
     parser.add_argument("--out", required=True, help="output folder")
@@ -318,7 +324,7 @@ def main(argv):
                         retries=args.retries, progress=not args.no_progress)
     except BatchArgumentError as e:
         print(f"minemap batch: {e}", file=sys.stderr)
-        return 2
+        return USAGE
     except KeyboardInterrupt:  # before any survey started
         return INTERRUPTED
     for r in summary["surveys"]:

@@ -21,8 +21,9 @@ from minemap.batch import batch, main
 COMMAND = None
 MAPPER = COMMAND or [sys.executable, "-m", "minemap"]  # the same, run directly to compare
 SCANS = 12  # about 1 s a map with one thread: time to kill a worker mid-survey
-# Measured: the only key of report.json that differs between two runs of one survey.
-VOLATILE = {"timings_s"}
+# Measured: the only keys of report.json that differ between two runs of one survey (wall clocks, and
+# how each run was asked for).
+VOLATILE = {"timings_s", "command_line", "run_options"}
 
 
 @pytest.fixture(scope="module")

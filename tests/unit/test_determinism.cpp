@@ -1,5 +1,6 @@
 // Determinism of the `minemap map` outputs: repeated runs and 1 or 2 threads write identical bytes
-// in every file (report.json: all but its "timings_s", wall-clock times), on the CPU and on PoCL;
+// in every file (report.json: all but its "timings_s", wall-clock times, and how each run was asked
+// for: "command_line", "run_options"), on the CPU and on PoCL;
 // PoCL and the CPU give poses that agree within a few ICP convergence steps (see the last test).
 #include <gtest/gtest.h>
 
@@ -25,11 +26,14 @@ std::set<std::string> file_names(const fs::path& dir) {
   return names;
 }
 
-/// report.json without its wall-clock timings, the one part that may differ between runs.
+/// report.json without what may differ between runs of one mapping: its wall-clock timings, and how
+/// the run was asked for (the command line, with its --out; threads and backend: run_options).
 std::string report_without_timings(const fs::path& dir) {
   auto report = nlohmann::json::parse(test::read_text(dir / "report.json"));
-  EXPECT_TRUE(report.contains("timings_s"));
-  report.erase("timings_s");
+  for (const char* key : {"timings_s", "command_line", "run_options"}) {
+    EXPECT_TRUE(report.contains(key)) << key;
+    report.erase(key);
+  }
   return report.dump(2);
 }
 

@@ -21,7 +21,7 @@
 #include <vector>
 
 #include "minemap/filter/slice_filter.hpp"
-#include "minemap/registration/point_to_point.hpp"
+#include "minemap/search/pair_sums.hpp"
 #include "minemap/search/pairing.hpp"
 
 namespace minemap {

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "minemap/backend/compute_backend.hpp"
+#include "minemap/core/name_table.hpp"
 
 namespace minemap {
 namespace opencl {
@@ -40,8 +41,10 @@ enum class Backend {
   kCpu,     ///< TBB
   kOpenCl,  ///< OpenCL (PoCL included), or an error saying why not
 };
+inline constexpr std::array<EnumName<Backend>, 3> kBackendNames{
+    {{Backend::kAuto, "auto"}, {Backend::kCpu, "cpu"}, {Backend::kOpenCl, "opencl"}}};
 const char* to_string(Backend backend);
-Backend parse_backend(const std::string& text);  ///< "auto", "cpu", "opencl"
+Backend parse_backend(const std::string& text);  ///< a name of kBackendNames
 
 /// Everything that decides which backend runs. Thread-safety: a plain value.
 struct BackendOptions {

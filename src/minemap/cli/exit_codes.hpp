@@ -1,6 +1,7 @@
 #pragma once
 // The `minemap` program's exit codes: a CLI matter, so they live with the CLI.
 #include "minemap/core/error.hpp"
+#include "minemap/core/name_table.hpp"
 
 namespace minemap {
 
@@ -28,6 +29,25 @@ enum class ExitCode : int {
                              ///< report.json); --accept-doubtful makes it 0
   kInterrupted = 130,        ///< SIGINT: finished outputs are kept, temp files removed
 };
+
+/// Each code's name, for programs that run `minemap` (the Python package's batch runner reads it).
+inline constexpr std::array<EnumName<ExitCode>, 15> kExitCodeNames{{
+    {ExitCode::kOk, "ok"},
+    {ExitCode::kInternal, "internal"},
+    {ExitCode::kUsage, "usage"},
+    {ExitCode::kInputError, "input_error"},
+    {ExitCode::kRegistrationFailed, "registration_failed"},
+    {ExitCode::kOutputError, "output_error"},
+    {ExitCode::kBackendUnavailable, "backend_unavailable"},
+    {ExitCode::kTruncatedInput, "truncated_input"},
+    {ExitCode::kNonFiniteInput, "non_finite_input"},
+    {ExitCode::kEmptyInput, "empty_input"},
+    {ExitCode::kInconsistentSurvey, "inconsistent_survey"},
+    {ExitCode::kCountBeyondLimits, "count_beyond_limits"},
+    {ExitCode::kSuspiciousUnits, "suspicious_units"},
+    {ExitCode::kDoubtfulMap, "doubtful_map"},
+    {ExitCode::kInterrupted, "interrupted"},
+}};
 
 /// The exit code of the `minemap` program for an input problem.
 constexpr ExitCode exit_code_for(InputProblem problem) {

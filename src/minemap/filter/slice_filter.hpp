@@ -31,6 +31,7 @@ struct SliceFilterSettings {
 
   /// Throws std::invalid_argument naming the bad setting.
   void validate() const;
+  bool operator==(const SliceFilterSettings&) const = default;
 };
 
 /// The widest median window the kernels hold (MM_MAX_MEDIAN_WINDOW).

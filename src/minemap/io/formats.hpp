@@ -161,6 +161,10 @@ struct Survey {
   Eigen::Vector3d origin_cm = Eigen::Vector3d::Zero();
   /// Warnings for the user, one line each: NaN points dropped, gaps in the numbering.
   std::vector<std::string> warnings;
+  /// The scans and poses are in 3DTK's frame (left-handed, y up, z forward): a uos survey, or one
+  /// converted by ReadSettings::right_handed_to_3dtk; otherwise the files' own (right-handed, z up).
+  /// The outputs a person opens follow it (views, map.laz).
+  bool frame_3dtk = false;
 };
 
 /// The fewest points a survey's scan may have (Horn's closed form needs three points).

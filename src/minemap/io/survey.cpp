@@ -571,9 +571,10 @@ Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
   std::string (*name_of)(std::uint64_t) = kitti_stem;
   const ReadSettings& read = settings.read;
   if (is_foreign_survey(dir)) {
-    survey = read_foreign_survey(dir, settings);
+    survey = read_foreign_survey(dir, settings);  // LAS/LAZ and E57 stay right-handed, z up
   } else {
     read_native_survey(dir, settings, survey, dropped, numbers, name_of);
+    survey.frame_3dtk = survey.format == "uos" || read.right_handed_to_3dtk;
   }
   if (settings.initial_poses) {
     const std::vector<Pose> poses = read_pose_list(*settings.initial_poses, survey.unit, survey.scans.size(), read,

@@ -13,7 +13,6 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
-#include <tbb/task_arena.h>
 
 #include <cmath>
 #include <optional>
@@ -22,6 +21,7 @@
 
 #include "minemap/backend/make_backend.hpp"
 #include "minemap/cli/cli.hpp"
+#include "minemap/cli/exit_codes.hpp"
 #include "minemap/core/error.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/io/scan_builder.hpp"
@@ -236,12 +236,15 @@ py::dict run_to_dict(const cli::MapCommand& command, const cli::MapRun& run, con
     return sources;
   }();
   d["report"] = py::module_::import("json").attr("loads")(report_json);
-  d["settings_preset"] = command.options.preset;
+  d["settings_preset"] = std::string(to_string(command.options.preset));
+  // The survey's frame, as its reader says (io::Survey::frame_3dtk): map.laz converts 3DTK's frame
+  // back to right-handed z up, as the views draw it.
+  d["frame"] = std::string(run.survey.frame_3dtk ? "3dtk" : "z_up");
   if (with_map) {
     // The merged map as map.ply holds it (world frame = the survey's local frame), in double, with
     // each point's scan index.
     std::size_t total = 0;
-    for (const ScanOutcome& s : result.scans) total += s.used_points_cm.size();
+    for (const ScanOutcome& s : result.scans) total += s.used_points_cm ? s.used_points_cm->size() : 0;
     py::array_t<double> points({static_cast<py::ssize_t>(total), py::ssize_t{3}});
     py::array_t<std::uint32_t> scan_index(static_cast<py::ssize_t>(total));
     auto p = points.mutable_unchecked<2>();
@@ -251,7 +254,8 @@ py::dict run_to_dict(const cli::MapCommand& command, const cli::MapRun& run, con
       const ScanOutcome& s = result.scans[i];
       const Eigen::Matrix3d r = s.world_from_points.block<3, 3>(0, 0);
       const Eigen::Vector3d t = s.world_from_points.block<3, 1>(0, 3);
-      for (const auto& q : s.used_points_cm) {
+      if (!s.used_points_cm) continue;
+      for (const auto& q : *s.used_points_cm) {
         const Eigen::Vector3d w = (r * q.cast<double>() + t) * per_cm;
         p(row, 0) = w.x(), p(row, 1) = w.y(), p(row, 2) = w.z();
         k(row++) = static_cast<std::uint32_t>(i);
@@ -321,12 +325,11 @@ io::Survey read_with_python(const std::filesystem::path& path, const io::SurveyR
 }
 
 cli::ExtraOutputs extra_outputs_with_python() {
-  return [](const std::filesystem::path& out_dir, const cli::MapRun& run) {
+  return [](const std::filesystem::path& out_dir, const cli::MapCommand& command, const cli::MapRun& run) {
     py::gil_scoped_acquire gil;
     if (!python_extra_outputs()) return;
     try {
-      cli::MapCommand none;
-      (*python_extra_outputs())(out_dir.string(), run_to_dict(none, run, "{}", true));
+      (*python_extra_outputs())(out_dir.string(), run_to_dict(command, run, "{}", true));
     } catch (py::error_already_set& e) {
       throw OutputError(out_dir.string() + ": " + std::string(py::str(e.value())));
     }
@@ -358,6 +361,8 @@ py::dict map_survey_api(const py::object& survey_path, const py::object& scans, 
                         const py::object& out) {
   cli::MapCommand command = parse(args);
   if (!out.is_none()) command.options.out = py::cast<std::string>(out);
+  command.command_line = {"minemap.map_survey", survey_path.is_none() ? std::string("<arrays>") : py::cast<std::string>(survey_path)};
+  command.command_line.insert(command.command_line.end(), args.begin(), args.end());
   std::optional<io::Survey> given;
   if (survey_path.is_none()) {
     // Scans given as arrays: one survey, in the order given, in `unit`.
@@ -383,28 +388,12 @@ py::dict map_survey_api(const py::object& survey_path, const py::object& scans, 
   std::string report;
   {
     py::gil_scoped_release no_gil;
-    if (given) {
-      // As run_map_command, with the survey already in memory.
-      run.survey = std::move(*given);
-      run.backend = cli::make_backend_for(command.options);
-      tbb::task_arena arena(cli::thread_count(command.options));
-      run.result = arena.execute(
-          [&] { return map_survey(run.survey.scans, command.settings, *run.backend.backend, {}, std::ref(interrupt)); });
-      run.survey_scans = run.result.scans.size();
-      if (run.result.interrupted) run.result.scans.resize(run.result.scans_matched);
-    } else {
-      run = cli::run_map_command(command, {}, std::ref(interrupt));
-    }
+    run = given ? cli::map_read_survey(command, std::move(*given), 0.0, {}, std::ref(interrupt))
+                : cli::run_map_command(command, {}, std::ref(interrupt));
     if (!command.options.out.empty()) {
       report = cli::write_outputs(command, run, extra_outputs_with_python());
     } else {
-      MapOutputSettings output;
-      output.unit = run.survey.unit;
-      output.load_s = run.load_s;
-      output.backend_choice = run.backend.message;
-      output.survey_scans = run.survey_scans;
-      output.origin_cm = run.survey.origin_cm;
-      report = map_report(run.result, run.survey.truth_cm, command.settings, output);
+      report = map_report(run.result, run.truth, command.settings, cli::output_settings(command, run));
     }
   }
   if (interrupt.raised) {
@@ -425,8 +414,7 @@ py::dict register_api(const py::handle& source, const py::handle& target, const 
   {
     py::gil_scoped_release no_gil;
     BackendChoice backend = cli::make_backend_for(command.options);
-    tbb::task_arena arena(cli::thread_count(command.options));
-    result = arena.execute([&] {
+    result = cli::with_threads(command.options, [&] {
       const auto data_cloud = backend.backend->prepare(data.points_cm, command.settings.tree);
       const auto model_cloud = backend.backend->prepare(model.points_cm, command.settings.tree);
       const WorldModel models[] = {{model_cloud.get(), model.world_from_points()}};
@@ -460,9 +448,17 @@ PYBIND11_MODULE(_core, m) {
 
   m.def("map_options", [](const std::string& preset) {
     py::list list;
-    for (const auto& o : cli::map_options(preset)) list.append(py::make_tuple(o.name, o.default_value, o.help, o.flag));
+    for (const auto& o : cli::map_options(parse_preset(preset))) {
+      list.append(py::make_tuple(o.name, o.default_value, o.help, o.flag));
+    }
     return list;
   }, py::arg("preset") = "default", "`minemap map`'s options: (name, default, help, is_flag).");
+
+  // The program's exit codes by name (cli/exit_codes.hpp), for the package's batch runner.
+  py::dict exit_codes;
+  for (const auto& [code, name] : kExitCodeNames) exit_codes[name] = static_cast<int>(code);
+  m.attr("exit_codes") = exit_codes;
+  m.attr("__version__") = cli::version();
 
   m.def("check_map_options", [](const std::vector<std::string>& args) { parse(args); }, py::arg("args"));
 

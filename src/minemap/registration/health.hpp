@@ -50,6 +50,7 @@ struct HealthSettings {
   double min_translation_constraint = 0.002;
   /// Throws std::invalid_argument naming the bad setting.
   void validate() const;
+  bool operator==(const HealthSettings&) const = default;
 };
 
 /// The figures of one judged match, and the verdict.

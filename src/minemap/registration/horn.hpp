@@ -3,7 +3,7 @@
 #include <optional>
 
 #include "minemap/core/pose.hpp"
-#include "minemap/registration/point_to_point.hpp"
+#include "minemap/search/pair_sums.hpp"
 
 namespace minemap {
 

@@ -5,7 +5,7 @@
 //   2. exact search until the step is small (usually 1-3 more iterations after phase 1);
 //   3. optionally, exact search again at a tighter pair bound (refinement), until the step is small.
 // Anderson acceleration (AA-ICP), when on, wraps the exact phases with its own accept/reject test.
-// The objective is point-to-point (point_to_point.hpp); the search and the sums run in the backend.
+// The objective is point-to-point (search/pair_sums.hpp); the search and the sums run in the backend.
 #include <span>
 #include <string>
 
@@ -21,15 +21,20 @@ struct IcpTermination {
   int max_iterations = 100;
   double min_translation_step_cm = 0.01;  ///< a phase has converged when one step moves less than this...
   double min_rotation_step_deg = 0.001;   ///< ...and turns less than this
-  int min_pairs = 250;                    ///< fewer pairs: the clouds do not overlap, registration fails
+  /// Fewer pairs: the clouds do not overlap, registration fails. The one definition of the 250 pairs:
+  /// the paper's overlap test (MappingSettings::min_overlap_pairs) starts from it.
+  int min_pairs = 250;
+  bool operator==(const IcpTermination&) const = default;
 };
 
-/// ICP's settings. IcpSettings{} is the paper's ICP; mapping() is what map_survey uses by default.
+/// ICP's settings. IcpSettings{} (= paper()) is the paper's ICP. The mapping presets' ICPs are in
+/// slam/mapping_settings.hpp (MappingSettings::default_icp(), simultaneous_icp()), and what each
+/// match of a survey runs is derived there (pairwise_icp(), relaxation_icp()).
 struct IcpSettings {
   /// kApproximate: the paper's schedule (approximate, then exact). kExact: exact kd-tree only.
   /// kBruteForce: brute force only (the Table I baseline).
   SearchMethod method = SearchMethod::kApproximate;
-  float max_pair_dist_cm = 25.0f;  ///< 3DTK's default
+  float max_pair_dist_cm = PairingSettings{}.max_pair_dist_cm;  ///< 3DTK's default, 25 cm
   /// After converging at max_pair_dist_cm, continue with exact search at this fraction of it until
   /// converged again (0 = off). Pairs up to 25 cm include wrong ones at occlusion edges, which bias
   /// point-to-point ICP by about 1 cm per 4 m step in a mine; 10 cm (0.4) removes most of that.
@@ -46,18 +51,11 @@ struct IcpSettings {
 
   /// The paper's ICP: approximate then exact search, 25 cm, plain steps.
   static IcpSettings paper() { return {}; }
-  /// minemap's mapping default: the paper's schedule, then a refinement at 10 cm (0.4 x 25 cm),
-  /// Anderson-accelerated (docs/benchmarks.md has the figures behind both).
-  static IcpSettings mapping() {
-    IcpSettings settings;
-    settings.refine_pair_dist_fraction = 0.4f;
-    settings.accelerate = true;
-    return settings;
-  }
   /// The refinement's pair bound in cm (0 when off).
   float refine_max_pair_dist_cm() const { return refine_pair_dist_fraction * max_pair_dist_cm; }
   /// Throws std::invalid_argument naming the bad setting.
   void validate() const;
+  bool operator==(const IcpSettings&) const = default;
 };
 
 enum class IcpStop {

@@ -37,6 +37,31 @@ nlohmann::json errors_json(const PoseErrors& e, double unit_per_cm) {
            e.path_length_cm > 0 ? 100.0 * e.mean_translation_cm / e.path_length_cm : 0.0}};
 }
 
+/// Each recorded option that changes the poses (or, `changes_poses` false, each that does not) under
+/// its keyword name, typed: report.json's "settings" and "run_options".
+nlohmann::json settings_json(const std::vector<RecordedSetting>& settings, bool changes_poses) {
+  nlohmann::json object = nlohmann::json::object();
+  for (const RecordedSetting& setting : settings) {
+    if (setting.changes_poses != changes_poses) continue;
+    nlohmann::json& value = object[setting.name];
+    switch (setting.kind) {
+      case RecordedSetting::Kind::kFlag: value = setting.value == "true"; break;
+      case RecordedSetting::Kind::kNumber:
+      case RecordedSetting::Kind::kNumbers: {
+        // Not JSON (inf, nan): kept as the text given.
+        const std::string text = setting.kind == RecordedSetting::Kind::kNumber ? setting.value : "[" + setting.value + "]";
+        value = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+        if (value.is_discarded()) value = setting.value;
+        break;
+      }
+      case RecordedSetting::Kind::kText:
+        value = setting.value.empty() ? nlohmann::json(nullptr) : nlohmann::json(setting.value);
+        break;
+    }
+  }
+  return object;
+}
+
 }  // namespace
 
 std::optional<TruthComparison> compare_with_truth(const MappingResult& result,
@@ -50,7 +75,7 @@ std::optional<TruthComparison> compare_with_truth(const MappingResult& result,
   return TruthComparison{pose_errors(initial, *truth_cm), pose_errors(registered, *truth_cm)};
 }
 
-std::string map_report(const MappingResult& result, const std::optional<std::vector<Pose>>& truth_cm,
+std::string map_report(const MappingResult& result, const std::optional<TruthComparison>& truth,
                        const MappingSettings& settings, const MapOutputSettings& output, double write_s) {
   const double unit_per_cm = 1.0 / centimetres_per(output.unit);
   nlohmann::json report;
@@ -67,22 +92,12 @@ std::string map_report(const MappingResult& result, const std::optional<std::vec
   report["backend_choice"] = output.backend_choice;
   report["backend_note"] = result.backend_note;
   report["notes"] = result.notes;
-  report["settings"] = {{"max_pair_dist_cm", settings.icp.max_pair_dist_cm},
-                        {"refine_max_pair_dist_cm", settings.icp.refine_max_pair_dist_cm()},
-                        {"max_iterations", settings.icp.termination.max_iterations},
-                        {"accelerate", settings.icp.accelerate},
-                        {"dense_models", settings.dense_models},
-                        {"bucket_size", settings.tree.bucket_size},
-                        {"filter", settings.filter_enabled},
-                        {"reduction", to_string(settings.reduction)},
-                        {"voxel_cm", settings.voxel_cm},
-                        {"model_voxel_cm", settings.model_voxel_cm},
-                        {"metascan_margin_cm", settings.metascan_margin_cm},
-                        {"median_window", settings.filter.median_window},
-                        {"outlier_threshold_cm", settings.filter.outlier_threshold_cm},
-                        {"min_point_spacing_cm", settings.filter.min_point_spacing_cm},
-                        {"slice_stride", settings.filter.slice_stride},
-                        {"min_overlap_pairs", settings.min_overlap_pairs}};
+  if (!output.version.empty()) report["version"] = output.version;
+  if (!output.command_line.empty()) report["command_line"] = output.command_line;
+  if (!output.settings.empty()) {
+    report["settings"] = settings_json(output.settings, true);
+    report["run_options"] = settings_json(output.settings, false);
+  }
   nlohmann::json scans = nlohmann::json::array();
   for (const auto& s : result.scans) {
     scans.push_back({{"name", s.name},
@@ -145,15 +160,16 @@ std::string map_report(const MappingResult& result, const std::optional<std::vec
   std::vector<double> per_scan;
   for (const auto& s : result.scans) per_scan.push_back(s.match_s);
   report["timings_s"]["per_scan"] = per_scan;
-  if (auto comparison = compare_with_truth(result, truth_cm)) {
-    report["truth"] = {{"odometry", errors_json(comparison->odometry, unit_per_cm)},
-                       {"registered", errors_json(comparison->registered, unit_per_cm)}};
+  if (truth) {
+    report["truth"] = {{"odometry", errors_json(truth->odometry, unit_per_cm)},
+                       {"registered", errors_json(truth->registered, unit_per_cm)}};
   }
   return report.dump(2) + "\n";
 }
 
 std::string write_map_outputs(const std::filesystem::path& out_dir, const MappingResult& result,
-                              const std::optional<std::vector<Pose>>& truth_cm, const MappingSettings& settings,
+                              const std::optional<std::vector<Pose>>& truth_cm,
+                              const std::optional<TruthComparison>& truth, const MappingSettings& settings,
                               const MapOutputSettings& output) {
   const auto start = std::chrono::steady_clock::now();
   std::filesystem::create_directories(out_dir);
@@ -176,7 +192,9 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
     positions.push_back(scan.pose_cm.block<3, 1>(0, 3));
     const Eigen::Matrix3d r = scan.world_from_points.block<3, 3>(0, 0);
     const Eigen::Vector3d t = scan.world_from_points.block<3, 1>(0, 3);
-    for (const auto& p : scan.used_points_cm) map_points.push_back((r * p.cast<double>() + t).cast<float>());
+    if (scan.used_points_cm) {
+      for (const auto& p : *scan.used_points_cm) map_points.push_back((r * p.cast<double>() + t).cast<float>());
+    }
     map_point_scans.resize(map_points.size(), static_cast<std::uint32_t>(i));
     // map.html's info box: why a registered scan's match is doubtful, or why an unregistered one failed.
     html_scans.push_back({.name = scan.name,
@@ -212,7 +230,7 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
       [&] { report::write_map_html(out_dir / "map.html", {map_points, map_point_scans, html_scans}, html); });
 
   const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  const std::string text = map_report(result, truth_cm, settings, output, write_s);
+  const std::string text = map_report(result, truth, settings, output, write_s);
   write_file_atomically(out_dir / "report.json", text);
   return text;
 }

@@ -13,6 +13,20 @@
 
 namespace minemap {
 
+/// One option of a run as report.json's "settings" records it (the command line makes them from its
+/// option definitions: every option, given or not).
+struct RecordedSetting {
+  enum class Kind { kFlag, kNumber, kNumbers, kText };
+  std::string name;  ///< the option's name as a Python keyword: --max-pair-dist-cm is "max_pair_dist_cm"
+  Kind kind = Kind::kText;
+  /// kFlag: "true" or "false"; kNumber: the value's shortest round-trip text; kNumbers: such texts,
+  /// comma-separated; kText: as given (empty: not given, written as null).
+  std::string value;
+  /// false: where and how the run ran (threads, backend, what it prints): report.json "run_options",
+  /// the rest "settings".
+  bool changes_poses = true;
+};
+
 struct MapOutputSettings {
   LengthUnit unit = LengthUnit::kCentimetre;  ///< the survey's unit: poses and map are written in it
   int up_axis = 1;                            ///< 1 (y) for 3DTK frames, 2 (z) for right-handed ones
@@ -24,6 +38,9 @@ struct MapOutputSettings {
   std::size_t survey_scans = 0;
   /// The survey's local frame in its files' frame (io::Survey::origin_cm): report.json's "origin".
   Eigen::Vector3d origin_cm = Eigen::Vector3d::Zero();
+  std::string version;                    ///< minemap's version (report.json "version")
+  std::vector<std::string> command_line;  ///< the run's arguments, program first (report.json)
+  std::vector<RecordedSetting> settings;  ///< every option (report.json "settings", "run_options"; empty: none)
 };
 
 /// Pose errors before (odometry) and after registration, when the survey has reference poses.
@@ -35,13 +52,16 @@ struct TruthComparison {
 std::optional<TruthComparison> compare_with_truth(const MappingResult& result,
                                                   const std::optional<std::vector<Pose>>& truth_cm);
 
-/// report.json's text (write_s: the time writing the other outputs took, for its timings).
-std::string map_report(const MappingResult& result, const std::optional<std::vector<Pose>>& truth_cm,
+/// report.json's text (truth: compare_with_truth's, made once by the caller; write_s: the time
+/// writing the other outputs took, for its timings).
+std::string map_report(const MappingResult& result, const std::optional<TruthComparison>& truth,
                        const MappingSettings& settings, const MapOutputSettings& output, double write_s = 0.0);
 
-/// Writes every output into `out_dir` (created if missing). Returns the report as JSON text.
+/// Writes every output into `out_dir` (created if missing): truth_cm draws the reference trajectory
+/// in the views, `truth` is its comparison (compare_with_truth). Returns the report as JSON text.
 std::string write_map_outputs(const std::filesystem::path& out_dir, const MappingResult& result,
-                              const std::optional<std::vector<Pose>>& truth_cm, const MappingSettings& settings,
+                              const std::optional<std::vector<Pose>>& truth_cm,
+                              const std::optional<TruthComparison>& truth, const MappingSettings& settings,
                               const MapOutputSettings& output);
 
 }  // namespace minemap

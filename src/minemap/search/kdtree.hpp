@@ -18,6 +18,7 @@ namespace minemap {
 
 struct KdTreeSettings {
   int bucket_size = 10;  ///< points per terminal bucket (paper: 10; Fig. 5 sweeps 1..100)
+  bool operator==(const KdTreeSettings&) const = default;
 };
 
 /// 32 bytes, laid out as OpenCL's int4 {axis, a, b, split bits} + float4 {left_max, right_min, 0, 0}.

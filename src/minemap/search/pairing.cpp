@@ -6,20 +6,11 @@
 
 namespace minemap {
 
-const char* to_string(SearchMethod method) {
-  switch (method) {
-    case SearchMethod::kExact: return "kd";
-    case SearchMethod::kApproximate: return "apx";
-    case SearchMethod::kBruteForce: return "brute";
-  }
-  return "?";
-}
+const char* to_string(SearchMethod method) { return name_in(kSearchMethodNames, method); }
 
 SearchMethod parse_search_method(const std::string& text) {
-  if (text == "kd" || text == "exact") return SearchMethod::kExact;
-  if (text == "apx" || text == "approximate") return SearchMethod::kApproximate;
-  if (text == "brute" || text == "bruteforce") return SearchMethod::kBruteForce;
-  throw std::invalid_argument("unknown search method '" + text + "' (expected kd, apx or brute)");
+  if (const auto alias = value_named(kSearchMethodAliases, text)) return *alias;
+  return parse_named(kSearchMethodNames, text, "search method");
 }
 
 PreparedCloud::PreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& tree_settings)

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "minemap/core/name_table.hpp"
 #include "minemap/core/pose.hpp"
 #include "minemap/search/kdtree.hpp"
 
@@ -23,11 +24,19 @@ enum class SearchMethod {
   kApproximate,  ///< descend to the query's bucket, return the bucket mean; no backtracking
   kBruteForce,   ///< every model point: the O(n*m) baseline
 };
+inline constexpr std::array<EnumName<SearchMethod>, 3> kSearchMethodNames{
+    {{SearchMethod::kExact, "kd"}, {SearchMethod::kApproximate, "apx"}, {SearchMethod::kBruteForce, "brute"}}};
+/// Longer names parse_search_method also takes (the command line offers the short ones).
+inline constexpr std::array<EnumName<SearchMethod>, 3> kSearchMethodAliases{
+    {{SearchMethod::kExact, "exact"}, {SearchMethod::kApproximate, "approximate"},
+     {SearchMethod::kBruteForce, "bruteforce"}}};
 const char* to_string(SearchMethod method);
-SearchMethod parse_search_method(const std::string& text);  ///< "kd", "apx", "brute"
+SearchMethod parse_search_method(const std::string& text);  ///< kSearchMethodNames or kSearchMethodAliases
 
 struct PairingSettings {
-  float max_pair_dist_cm = 25.0f;  ///< pairs farther apart are dropped (3DTK's default, 25 cm)
+  /// Pairs farther apart are dropped: 3DTK's default, 25 cm, and the one definition of the pair
+  /// bound's default (IcpSettings::max_pair_dist_cm starts from it).
+  float max_pair_dist_cm = 25.0f;
 };
 
 /// The closest model point of one query, for tests and overlap counting.

@@ -26,7 +26,7 @@ namespace minemap::shared {
 /// Largest median-filter window (points); SliceFilterSettings::validate enforces it.
 #define MM_MAX_MEDIAN_WINDOW 31
 
-// ---- the point-to-point objective's sums (registration/point_to_point.hpp) -------------------------
+// ---- the point-to-point objective's sums (search/pair_sums.hpp) ---------------------------------
 // Per pair (p in the data cloud, m its closest model point, both centred on the data centroid):
 //   count, sum p' (3), sum m' (3), sum p' m'^T (9, row-major), sum |p - m|^2.
 #define MM_TERM_COUNT 0

@@ -35,6 +35,7 @@ struct PoseGraphSettings {
   int max_iterations = 20;
   /// Stop when no pose moves more than this (cm, and the same in radians times 100 cm).
   double min_update_cm = 1e-3;
+  bool operator==(const PoseGraphSettings&) const = default;
 };
 
 struct PoseGraphResult {

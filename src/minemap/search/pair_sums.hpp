@@ -1,11 +1,12 @@
 #pragma once
-// The point-to-point objective of ICP (paper, eq. (1)): E(R, t) = sum_i |m_i - (R d_i + t)|^2 over
-// the closest-point pairs (d_i in the data cloud, m_i in the model). What each pair contributes is
-// written once, in minemap/shared/minemap_shared.h (mm_add_point_to_point_terms), and used by both
+// The sums of the point-to-point objective of ICP (paper, eq. (1)): E(R, t) = sum_i |m_i - (R d_i + t)|^2
+// over the closest-point pairs (d_i in the data cloud, m_i in the model). What each pair contributes
+// is written once, in minemap/shared/minemap_shared.h (mm_add_point_to_point_terms), and used by both
 // backends: the backends only add MM_SUM_TERMS numbers per block of pairs, in a fixed order; they
-// do not know what the numbers mean. Horn's method (horn.hpp) reads them through PairSums.
-// Another objective (point-to-plane, say) is another set of terms and another reader; the search
-// and the reduction stay as they are.
+// do not know what the numbers mean. Horn's method (registration/horn.hpp) reads them through
+// PairSums. Another objective (point-to-plane, say) is another set of terms and another reader; the
+// search and the reduction stay as they are. Here, below the backend (search/), because a backend
+// returns them: registration/ builds on the backend, not the other way round.
 #include <Eigen/Core>
 
 #include "minemap/shared/minemap_shared.h"

@@ -1,11 +1,11 @@
-#include "minemap/report/live_state.hpp"
+#include "minemap/cli/watch_state.hpp"
 
 #include <nlohmann/json.hpp>
 
 #include "minemap/core/error.hpp"
 #include "minemap/io/text_reader.hpp"
 
-namespace minemap {
+namespace minemap::cli {
 namespace {
 
 using json = nlohmann::json;
@@ -102,7 +102,7 @@ ScanOutcome outcome_of(const json& j) {
 
 }  // namespace
 
-std::string live_state_json(const LiveState& state) {
+std::string watch_state_json(const WatchState& state) {
   const MappingResult& r = state.result;
   json scans = json::array();
   for (std::size_t i = 0; i < r.scans.size(); ++i) {
@@ -128,14 +128,14 @@ std::string live_state_json(const LiveState& state) {
   return j.dump(1) + "\n";
 }
 
-LiveState read_live_state(const std::filesystem::path& path) {
+WatchState read_watch_state(const std::filesystem::path& path) {
   const std::string text = io::detail::read_file_bytes(path);
   try {
     const json j = json::parse(text);
     if (j.at("format") != kFormat || j.at("version") != kVersion) {
       throw std::invalid_argument("not a minemap watch state of version " + std::to_string(kVersion));
     }
-    LiveState state;
+    WatchState state;
     state.options = j.at("options");
     state.finished = j.at("finished");
     for (const auto& scan : j.at("scans")) {
@@ -160,4 +160,4 @@ LiveState read_live_state(const std::filesystem::path& path) {
   }
 }
 
-}  // namespace minemap
+}  // namespace minemap::cli

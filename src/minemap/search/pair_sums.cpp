@@ -1,4 +1,4 @@
-#include "minemap/registration/point_to_point.hpp"
+#include "minemap/search/pair_sums.hpp"
 
 #include <cmath>
 

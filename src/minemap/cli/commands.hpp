@@ -1,0 +1,47 @@
+#pragma once
+// Internal to the command line: the subcommands app.cpp dispatches to, one file each.
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "minemap/cli/cli.hpp"
+#include "minemap/cli/map_options.hpp"
+#include "minemap/sim/mine_simulator.hpp"
+
+namespace minemap::cli {
+
+/// A subcommand that takes `map`'s options: its CLI11 app and the table that declared them.
+struct MapSubcommand {
+  CLI::App* app = nullptr;
+  std::unique_ptr<MapOptionTable> options;
+};
+
+/// `minemap map` (command_map.cpp): reads, maps and writes a survey; returns the exit code.
+int run_map(const MapCommand& command, const Hooks& hooks);
+MapSubcommand add_map_command(CLI::App& app, MapCommand& command);
+
+/// What `watch` takes beyond `map`'s options.
+struct WatchOptions {
+  std::size_t stop_after_scans = 0;  ///< finish once this many scans are matched (0: on Ctrl-C)
+  double idle_timeout_s = 0.0;       ///< finish after this long without a new scan (0: never)
+  int poll_ms = 500;                 ///< how often the folder is looked at
+};
+/// `minemap watch` (command_watch.cpp). `options_text`: the options that change the poses
+/// (mapping_options_text), which a resume must match.
+int run_watch(const MapCommand& command, const WatchOptions& watch, const std::string& options_text,
+              const Hooks& hooks);
+MapSubcommand add_watch_command(CLI::App& app, MapCommand& command, WatchOptions& watch);
+
+struct SimulateOptions {
+  fs::path out;
+  int scans = 0;
+  std::uint32_t seed = sim::MineSettings{}.seed;
+  double loop_m = 0.0;
+  double step_m = sim::MineSettings{}.mean_step_cm / 100.0;
+};
+/// `minemap simulate` (command_simulate.cpp).
+int run_simulate(const SimulateOptions& options);
+CLI::App* add_simulate_command(CLI::App& app, SimulateOptions& options, MapOptions& process);
+
+}  // namespace minemap::cli

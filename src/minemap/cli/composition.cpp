@@ -1,0 +1,128 @@
+// The composition root of `map` and `watch` (cli.hpp): the options become a backend, threads, read
+// settings, a mapping and its output settings here, once, for the program and the Python package.
+#include <tbb/info.h>
+
+#include <algorithm>
+#include <chrono>
+
+#include "minemap/cli/cli.hpp"
+#include "minemap/cli/console.hpp"
+#include "minemap/cli/map_options.hpp"
+#include "minemap/cli/signals.hpp"
+
+namespace minemap::cli {
+
+BackendChoice make_backend_for(const MapOptions& options) {
+  BackendOptions backend_options = backend_options_from_environment(options.backend);
+  if (!options.opencl_device.empty()) backend_options.opencl.device = options.opencl_device;
+  return make_backend(backend_options);
+}
+
+int thread_count(const MapOptions& options) {
+  const int max_threads = tbb::info::default_concurrency();
+  return options.threads > 0 ? std::min(options.threads, max_threads) : max_threads;
+}
+
+io::SurveyReadSettings survey_read_settings(const MapOptions& options) {
+  io::SurveyReadSettings read;
+  if (!options.unit.empty()) read.read.unit = parse_length_unit(options.unit);
+  read.read.points_per_slice = options.points_per_slice;
+  read.read.detect_slices = !options.no_slice_detection;
+  read.read.right_handed_to_3dtk = options.right_handed_to_3dtk;
+  if (!options.initial_poses.empty()) read.initial_poses = options.initial_poses;
+  if (!options.reference_poses.empty()) read.reference_poses = options.reference_poses;
+  return read;
+}
+
+MapCommand parse_map_options(const std::vector<std::string>& args) {
+  MapCommand command;
+  command.options.preset = preset_argument(args);
+  command.settings = MappingSettings::preset(command.options.preset);
+  CLI::App app{"minemap map options"};
+  const MapOptionTable table(app, command);
+  // CLI11 takes the arguments reversed (it pops from the back).
+  std::vector<std::string> reversed(args.rbegin(), args.rend());
+  try {
+    app.parse(reversed);
+  } catch (const CLI::ParseError& e) {
+    throw std::invalid_argument(e.what());
+  }
+  command.recorded = table.record();
+  command.command_line = args;
+  finish_settings(command);
+  return command;
+}
+
+std::vector<OptionInfo> map_options(Preset preset) {
+  MapCommand command;
+  command.options.preset = preset;
+  command.settings = MappingSettings::preset(preset);
+  CLI::App app{"minemap map options"};
+  const MapOptionTable table(app, command);
+  std::vector<OptionInfo> list;
+  for (const CLI::Option* option : app.get_options()) {
+    const std::string name = option->get_single_name();
+    if (name == "help" || name == "h") continue;
+    list.push_back({"--" + name, option->get_default_str(), option->get_description(), option->get_expected_min() == 0});
+  }
+  return list;
+}
+
+MapRun map_read_survey(const MapCommand& command, io::Survey survey, double load_s, const ProgressCallback& progress,
+                       const StopRequested& stop_requested) {
+  const MapOptions& options = command.options;
+  MapRun run;
+  run.survey = std::move(survey);
+  run.load_s = load_s;
+  // The composition root: the backend is made here, from the options and the environment.
+  run.backend = make_backend_for(options);
+  if (!options.quiet) print_survey(options, run);
+  run.result = with_threads(options, [&] {
+    return map_survey(run.survey.scans, command.settings, *run.backend.backend, progress, stop_requested);
+  });
+  run.survey_scans = run.result.scans.size();
+  if (run.result.interrupted) {
+    run.result.scans.resize(run.result.scans_matched);
+    if (run.survey.truth_cm) run.survey.truth_cm->resize(run.result.scans_matched);
+  }
+  run.truth = compare_with_truth(run.result, run.survey.truth_cm);
+  return run;
+}
+
+MapRun run_map_command(const MapCommand& command, const ProgressCallback& progress,
+                       const StopRequested& stop_requested) {
+  // Read everything before touching the output folder: bad input leaves it as it was.
+  const auto start = std::chrono::steady_clock::now();
+  io::Survey survey = io::read_survey(command.options.survey, survey_read_settings(command.options));
+  const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return map_read_survey(command, std::move(survey), load_s, progress, stop_requested);
+}
+
+MapOutputSettings output_settings(const MapCommand& command, const MapRun& run) {
+  const MapOptions& options = command.options;
+  MapOutputSettings output;
+  output.unit = run.survey.unit;
+  output.up_axis = run.survey.frame_3dtk ? 1 : 2;  // the reader says which frame the survey is in
+  output.title = "minemap " + std::string(to_string(command.settings.mode)) + ": " + options.survey.filename().string();
+  output.load_s = run.load_s;
+  output.backend_choice = run.backend.message;
+  output.survey_scans = run.survey_scans;
+  output.origin_cm = run.survey.origin_cm;
+  output.version = version();
+  output.command_line = command.command_line;
+  output.settings = command.recorded;
+  return output;
+}
+
+std::string write_outputs(const MapCommand& command, MapRun& run, const ExtraOutputs& extra) {
+  const MapOutputSettings output = output_settings(command, run);
+  const signals::SignalsBlocked no_interrupts_while_writing;
+  return with_threads(command.options, [&] {
+    std::string report = write_map_outputs(command.options.out, run.result, run.survey.truth_cm, run.truth,
+                                           command.settings, output);
+    if (extra) extra(command.options.out, command, run);
+    return report;
+  });
+}
+
+}  // namespace minemap::cli

@@ -1,0 +1,53 @@
+#pragma once
+// Internal to the command line. What `map` and `watch` print (stdout: what happened; stderr:
+// progress, warnings and what went wrong, each naming the scan's file), and the one exit policy
+// both follow (a scan not registered: 4; a doubtful match: 13 unless --accept-doubtful).
+//
+// Thread-safety: the thread running the command.
+#include <string>
+#include <vector>
+
+#include "minemap/cli/cli.hpp"
+
+namespace minemap::cli {
+
+/// Progress on stderr: a one-line bar on a terminal; otherwise (a log file, a batch job) a plain
+/// line per matched scan, and one when the reduction is done.
+class ProgressBar {
+ public:
+  explicit ProgressBar(bool enabled);
+  ~ProgressBar();
+  ProgressBar(const ProgressBar&) = delete;
+  ProgressBar& operator=(const ProgressBar&) = delete;
+  void operator()(std::size_t done, std::size_t total, const std::string& phase);
+
+ private:
+  bool enabled_;
+  bool terminal_;
+  bool drawn_ = false;
+};
+
+/// The survey read (scans, order, warnings) and the backend chosen.
+void print_survey(const MapOptions& options, const MapRun& run);
+/// The pose errors against the reference poses, when the survey has them.
+void print_truth(const MapRun& run);
+/// Each loop candidate, closed or not (an unclosed one only when no loop closed).
+void print_loops(const MapOptions& options, const MappingResult& result);
+
+/// What the matches came to: the scans not registered and the doubtful ones, each named on stderr
+/// with its file (`sources`, one per scan).
+struct Verdict {
+  bool all_registered = true;
+  std::vector<std::size_t> doubtful;
+};
+Verdict judge_run(const MappingResult& result, const std::vector<std::string>& sources);
+/// True when the outputs are written despite a scan not registered (--write-unregistered); else
+/// says that nothing was written.
+bool write_despite(const Verdict& verdict, const MapOptions& options);
+/// The exit code of a finished run, with the closing line on the doubtful scans.
+int exit_code_of(const Verdict& verdict, const MapOptions& options, std::size_t scans);
+
+/// Each scan's file, for messages.
+std::vector<std::string> sources_of(const io::Survey& survey);
+
+}  // namespace minemap::cli

@@ -1,0 +1,45 @@
+#pragma once
+// Internal (not installed). The metascan: one kd-tree over the points of the registered scans near
+// a scan, as the paper (and slam6D's --metascan) match against. One tree answers each query once,
+// where searching every neighbour's own tree in turn costs a search per overlapping scan. It holds
+// only the model points the scan can reach (inside its box grown by a margin: in a tunnel the
+// nearby scans hold about ten times the points that lie there, docs/benchmarks.md), expressed in a
+// frame near the scan so its float coordinates stay small wherever the survey is. The relaxation's
+// union of neighbours (paper, IV.B step 3) is built by the same code.
+//
+// Thread-safety: uses the backend, one thread at a time; assembles in parallel, deterministically.
+#include <memory>
+#include <vector>
+
+#include "minemap/backend/compute_backend.hpp"
+#include "minemap/slam/mapping_settings.hpp"
+#include "minemap/slam/survey_state.hpp"
+
+namespace minemap::detail {
+
+class LocalMap {
+ public:
+  /// Which scans a metascan takes: the registered ones before the scan (while matching; with loops
+  /// on, only the last loops.min_scan_gap, so a loop is the pose graph's to close), or every scan
+  /// near it, earlier or later (judging the finished map).
+  enum class Scope { kEarlier, kWholeMap };
+
+  LocalMap(const MappingSettings& settings, ComputeBackend& backend) : settings_(settings), backend_(backend) {}
+
+  /// The metascan of scan i: the scans near it where it stands (`standing`, SurveyState::nearby),
+  /// in the frame `frame`, holding their model points within its box at `at` grown by `grow_cm`.
+  std::shared_ptr<const PreparedCloud> metascan(const SurveyState& state, std::size_t i, const Pose& standing,
+                                                const Pose& frame, const Pose& at, double grow_cm, Scope scope) const;
+
+  /// One kd-tree, in the frame `frame`, of the model points of scans `near` that scan i can reach
+  /// at `at`: inside its box grown by `grow_cm`. Concatenated in the order of `near`.
+  std::shared_ptr<const PreparedCloud> union_of(const SurveyState& state, std::size_t i,
+                                                const std::vector<std::size_t>& near, const Pose& frame,
+                                                const Pose& at, double grow_cm) const;
+
+ private:
+  const MappingSettings& settings_;
+  ComputeBackend& backend_;
+};
+
+}  // namespace minemap::detail

@@ -1,0 +1,167 @@
+#include "minemap/slam/loop_closing.hpp"
+
+#include <algorithm>
+
+#include "minemap/registration/match_information.hpp"
+
+namespace minemap::detail {
+
+bool LoopClosing::geometric(const SurveyState& state, std::size_t k) const {
+  return settings_.loops.information_from_geometry && state.prepared(k).planes.has_value();
+}
+
+std::vector<PoseGraphEdge> LoopClosing::chain(const SurveyState& state) const {
+  std::vector<PoseGraphEdge> edges;
+  for (std::size_t k = 1; k < state.size(); ++k) {
+    // A scan left at odometry constrains its neighbours only weakly.
+    const bool matched = state.registered(k) && state.registered(k - 1);
+    edges.push_back({k - 1, k, rigid_inverse(state.pose(k - 1)) * state.pose(k), matched ? 1.0 : 0.01});
+    if (matched && geometric(state, k)) edges.back().information = edge_information(state, k - 1, k, state.pose(k));
+  }
+  return edges;
+}
+
+std::vector<std::vector<LoopClosing::Candidate>> LoopClosing::returns(const SurveyState& state) const {
+  // For each scan, the nearest scan at least `gap` earlier, when near enough. Scans in a row that
+  // all have one are one return to a known place: one loop edge for it, from the pair that stands
+  // closest (the others see less of each other: a scan in a cross-cut against one in the drive),
+  // the next closest tried when a match is not trusted. Several edges of one return would pull
+  // the relaxation towards their disagreement.
+  const std::size_t n = state.size();
+  const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
+  const auto position = [&](std::size_t k) { return state.pose(k).block<3, 1>(0, 3); };
+  std::vector<double> driven_cm(n, 0.0);  // along the scan positions, from scan 0
+  for (std::size_t k = 1; k < n; ++k) driven_cm[k] = driven_cm[k - 1] + (position(k) - position(k - 1)).norm();
+  std::vector<std::vector<Candidate>> found;
+  for (std::size_t j = gap; j < n; ++j) {
+    if (!state.registered(j)) continue;
+    Candidate best{n, j, settings_.loops.max_distance_cm};
+    for (std::size_t i = 0; i + gap <= j; ++i) {
+      if (!state.registered(i) || driven_cm[j] - driven_cm[i] < settings_.loops.min_path_cm) continue;
+      const double d = (position(i) - position(j)).norm();
+      if (d < best.distance_cm) best = {i, j, d};
+    }
+    if (best.from == n) continue;
+    if (found.empty() || found.back().back().to + 1 != j) found.emplace_back();
+    found.back().push_back(best);
+  }
+  for (std::vector<Candidate>& candidates : found) {
+    std::stable_sort(candidates.begin(), candidates.end(),
+                     [](const Candidate& a, const Candidate& b) { return a.distance_cm < b.distance_cm; });
+  }
+  return found;
+}
+
+std::optional<Pose> LoopClosing::loop_match(const SurveyState& state, std::size_t i, std::size_t j,
+                                            std::string& doubt) const {
+  const std::size_t model[] = {i};
+  const std::vector<WorldModel> models = state.models_of(model);
+  const Pose start = state.pose(j);
+  for (const float factor : settings_.loops.bound_factors) {
+    const float bound = factor * registration_.icp().max_pair_dist_cm;
+    if (bound > settings_.max_retry_bound_cm) break;
+    // Its iterations are not Table I's: a loop match is neither step 1 nor step 3.
+    const WideMatch match = registration_.match_from_wide_bound(state.prepared(j), start, models, bound);
+    if (!match.fine) {
+      doubt = match.failure;
+      continue;
+    }
+    if (!match.health.doubtful()) return match.fine->world_from_data;
+    doubt = match.health.doubt;
+  }
+  return std::nullopt;
+}
+
+/// The probe points of `to` with a partner in `from`'s model within the pair bound, on a plane of
+/// `to`'s own surface, give the point-to-plane information; scaled so that its mean translation
+/// information is the settings' (1 / sigma^2), with a floor of loops.min_information_fraction of
+/// that in every direction: a match that could not see a direction leaves it to the other edges
+/// instead of holding it at its guess.
+Matrix6d LoopClosing::edge_information(const SurveyState& state, std::size_t from, std::size_t to,
+                                       const Pose& to_pose) const {
+  const PreparedScan& target = state.prepared(to);
+  const ModelPlacement placed{state.prepared(from).model_cloud.get(), rigid_inverse(state.pose(from)) * to_pose};
+  const std::vector<NearestPair> nearest = backend_.nearest(*target.probe, {&placed, 1}, SearchMethod::kExact,
+                                                            PairingSettings{registration_.icp().max_pair_dist_cm});
+  const std::span<const Eigen::Vector3f> points = target.probe->points();
+  std::vector<Eigen::Vector3f> paired;
+  for (std::size_t k = 0; k < nearest.size(); ++k) {
+    if (nearest[k].squared_distance_cm2 >= 0.0f) paired.push_back(points[k]);
+  }
+  const PoseGraphSettings& graph = settings_.loops.graph;
+  const double t = 1.0 / (graph.translation_sigma_cm * graph.translation_sigma_cm);
+  const double r = 1.0 / (graph.rotation_sigma_rad * graph.rotation_sigma_rad);
+  Eigen::Matrix<double, 6, 1> floor;
+  floor << t, t, t, r, r, r;
+  floor *= settings_.loops.min_information_fraction;
+  const Matrix6d geometry = point_to_plane_information(paired, *target.planes);
+  const double translation_trace = geometry.topLeftCorner<3, 3>().trace();
+  if (!(translation_trace > 0.0)) return Matrix6d::Zero();  // no plane seen: the settings' sigmas
+  return geometry * (3.0 * t / translation_trace) + Matrix6d(floor.asDiagonal());
+}
+
+void LoopClosing::judge_again(SurveyState& state, const RunControl& control) const {
+  // The relaxation moved every scan: each is judged again where it ended, against the map of all
+  // scans near it. A scan that looked doubtful against a few recent scans (a corner that sees
+  // where the drive began) is then judged against the start too.
+  const double grow_cm = double(registration_.icp().max_pair_dist_cm);
+  for (std::size_t k = 1; k < state.size() && !control.stop_requested(); ++k) {
+    const RegistrationHealth& old = state.health(k);
+    if (!state.registered(k) || !old.judged || old.out_of_reach) continue;
+    const Pose& pose = state.pose(k);
+    const auto map = local_map_.metascan(state, k, pose, pose, pose, grow_cm, LocalMap::Scope::kWholeMap);
+    const std::vector<WorldModel> models{{map.get(), pose}};
+    RegistrationHealth health = registration_.judge(state.prepared(k), pose, pose, models);
+    health.correction_cm = old.correction_cm;
+    health.correction_deg = old.correction_deg;
+    health.moved_cm = old.moved_cm;
+    health.retry_bound_cm = old.retry_bound_cm;
+    health.after_loop_closure = true;
+    state.judged(k, std::move(health));
+  }
+}
+
+std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl& control) const {
+  std::vector<LoopClosure> loops;
+  const std::size_t n = state.size();
+  if (n <= static_cast<std::size_t>(settings_.loops.min_scan_gap)) return loops;
+  std::vector<Pose> poses(n);
+  for (std::size_t k = 0; k < n; ++k) poses[k] = state.pose(k);
+  std::vector<PoseGraphEdge> edges = chain(state);
+  const std::size_t chain_edges = edges.size();
+  for (const std::vector<Candidate>& candidates : returns(state)) {
+    for (const Candidate& candidate : candidates) {
+      if (control.stop_requested()) return loops;
+      LoopClosure loop;
+      loop.from = candidate.from;
+      loop.to = candidate.to;
+      const std::optional<Pose> matched = loop_match(state, loop.from, loop.to, loop.doubt);
+      if (matched) {
+        loop.closed = true;
+        const Pose moved = rigid_inverse(poses[loop.to]) * *matched;
+        loop.gap_before_cm = translation_norm(moved);
+        loop.gap_before_deg = rotation_angle_deg(moved);
+        edges.push_back({loop.from, loop.to, rigid_inverse(poses[loop.from]) * *matched, 1.0});
+        // At the pose the loop match found, not where the chain left the scan.
+        if (geometric(state, loop.to)) edges.back().information = edge_information(state, loop.from, loop.to, *matched);
+      }
+      loops.push_back(loop);
+      if (loop.closed) break;
+    }
+  }
+  if (edges.size() == chain_edges) return loops;
+  const PoseGraphResult relaxed = optimise_pose_graph(poses, edges, 0, settings_.loops.graph);
+  for (std::size_t k = 1; k < n; ++k) state.place(k, relaxed.poses[k]);
+  judge_again(state, control);
+  std::size_t edge = chain_edges;
+  for (LoopClosure& loop : loops) {
+    if (!loop.closed) continue;
+    const Pose wanted = relaxed.poses[loop.from] * edges[edge++].from_to;
+    const Pose left = rigid_inverse(relaxed.poses[loop.to]) * wanted;
+    loop.gap_after_cm = translation_norm(left);
+    loop.gap_after_deg = rotation_angle_deg(left);
+  }
+  return loops;
+}
+
+}  // namespace minemap::detail

@@ -1,0 +1,62 @@
+#pragma once
+// Internal (not installed). Closing loops after the last scan (MappingSettings::loops; pairwise and
+// incremental matching), as 3DTK's LUM does:
+//  1. find returns by position: for each scan the nearest scan at least min_scan_gap earlier and
+//     min_path_cm of drive back, when near enough; scans in a row that all have one are one return;
+//  2. match each return's closest pair, coarse to fine (ScanRegistration::match_from_wide_bound),
+//     the next closest when a match is not trusted;
+//  3. one pose graph: the chain of scan-to-scan steps as matched plus the trusted loop edges, each
+//     weighted by its match's geometry (point-to-plane information, registration/match_information.hpp);
+//  4. apply the relaxed poses, and judge every scan again where it ended, against the whole map
+//     near it.
+//
+// Thread-safety: uses the backend, one thread at a time.
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "minemap/backend/compute_backend.hpp"
+#include "minemap/slam/local_map.hpp"
+#include "minemap/slam/pose_graph.hpp"
+#include "minemap/slam/run_control.hpp"
+#include "minemap/slam/scan_registration.hpp"
+#include "minemap/slam/survey_state.hpp"
+
+namespace minemap::detail {
+
+class LoopClosing {
+ public:
+  LoopClosing(const MappingSettings& settings, ComputeBackend& backend, const ScanRegistration& registration,
+              const LocalMap& local_map)
+      : settings_(settings), backend_(backend), registration_(registration), local_map_(local_map) {}
+
+  /// Every loop candidate tried (closed or not); the scans it moved are placed in `state`. A stop
+  /// request ends it early with what it tried by then.
+  std::vector<LoopClosure> close(SurveyState& state, const RunControl& control) const;
+
+ private:
+  struct Candidate {
+    std::size_t from, to;
+    double distance_cm;
+  };
+  /// Step 1: the returns to known places, each its candidates closest first.
+  std::vector<std::vector<Candidate>> returns(const SurveyState& state) const;
+  /// Step 2: a trusted match of scan j against scan i alone, from j's current pose, at each bound of
+  /// loops.bound_factors in turn. Empty when none is trusted; `doubt` then says why.
+  std::optional<Pose> loop_match(const SurveyState& state, std::size_t i, std::size_t j, std::string& doubt) const;
+  /// The chain of scan-to-scan steps as the scans stand (step 3's first edges).
+  std::vector<PoseGraphEdge> chain(const SurveyState& state) const;
+  /// The information of the edge `from` -> `to` (`to` at `to_pose`), from the geometry of their pairs.
+  Matrix6d edge_information(const SurveyState& state, std::size_t from, std::size_t to, const Pose& to_pose) const;
+  /// Whether edge information comes from geometry for an edge ending at scan k (its planes exist).
+  bool geometric(const SurveyState& state, std::size_t k) const;
+  /// Step 4's judging of every matched scan at its final pose against the whole map near it.
+  void judge_again(SurveyState& state, const RunControl& control) const;
+
+  const MappingSettings& settings_;
+  ComputeBackend& backend_;
+  const ScanRegistration& registration_;
+  const LocalMap& local_map_;
+};
+
+}  // namespace minemap::detail

@@ -1,0 +1,73 @@
+#pragma once
+// What a mapping run hands back: each scan's outcome, the loops it tried, the stage times and the
+// counters of Table I. A value built from the matcher's state when it is asked for
+// (SurveyMatcher::result), never the state itself.
+//
+// Thread-safety: plain values.
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "minemap/core/pose.hpp"
+#include "minemap/io/formats.hpp"
+#include "minemap/registration/health.hpp"
+#include "minemap/registration/icp.hpp"
+
+namespace minemap {
+
+/// How one scan ended up.
+struct ScanOutcome {
+  std::string name;
+  Pose pose_cm = Pose::Identity();          ///< final T_world_file (cm)
+  Pose initial_pose_cm = Pose::Identity();  ///< the odometry pose it started from
+  std::vector<io::FrameLine> frames;        ///< every pose it took, 3DTK .frames style (last = final)
+  IcpResult last_match;                     ///< the last ICP run that moved it (pairwise or relaxation)
+  RegistrationHealth health;                ///< how far last_match can be trusted
+  int relaxation_matches = 0;               ///< step-3 matches of this scan
+  /// Seconds spent when this scan arrived: its own match and (kSimultaneous) the relaxation after
+  /// it; the cost per new scan (loop closing and the last relaxation are in MappingResult::times).
+  double match_s = 0;
+  std::size_t points_in = 0;                ///< points read
+  std::size_t points_used = 0;              ///< points after filtering, used for matching
+  std::size_t outliers_replaced = 0;
+  /// The filtered points, in the points frame (shared, not copied, between results of one run;
+  /// null in an outcome read back from watch.json).
+  std::shared_ptr<const std::vector<Eigen::Vector3f>> used_points_cm;
+  Pose world_from_points = Pose::Identity();    ///< final T_world_points (places used_points_cm)
+  bool registered = true;                   ///< false: no registration succeeded; pose from odometry
+  std::string failure;                      ///< why, when !registered
+};
+
+struct StageTimes {
+  double filter_s = 0, tree_build_s = 0, pairwise_s = 0, relaxation_s = 0, loop_closure_s = 0;
+};
+
+/// A loop the closing step found: scan `to` stands near the earlier scan `from`.
+struct LoopClosure {
+  std::size_t from = 0, to = 0;
+  bool closed = false;              ///< a trusted match joined them (an edge of the relaxation)
+  std::string doubt;                ///< when not closed: why
+  double gap_before_cm = 0, gap_before_deg = 0;  ///< where the match put `to`, against its pose before
+  double gap_after_cm = 0, gap_after_deg = 0;    ///< the same after the relaxation
+};
+
+struct MappingResult {
+  std::vector<ScanOutcome> scans;
+  std::string backend;       ///< the backend that made the poses: "cpu: ..." / "opencl: <device>"
+  std::string backend_note;  ///< empty, or why another backend than the one handed in made them
+  std::vector<std::string> notes;  ///< fallbacks, skipped filters
+  StageTimes times;
+  int step1_icp_iterations = 0;  ///< Table I: ICP iterations of the pairwise step
+  int step3_icp_iterations = 0;  ///< Table I: ICP iterations of the relaxation
+  int relaxation_matches = 0;
+  std::vector<LoopClosure> loops;  ///< every loop candidate tried (MappingSettings::loops)
+  /// Stopped on request (map_survey's stop_requested) after `scans_matched` scans (0..k-1 hold their
+  /// final poses; the rest are untouched); a complete run has scans_matched == scans.size().
+  bool interrupted = false;
+  std::size_t scans_matched = 0;
+  bool all_registered() const;
+  /// Indices of the registered scans whose last match was judged doubtful (ScanOutcome::health).
+  std::vector<std::size_t> doubtful() const;
+};
+
+}  // namespace minemap

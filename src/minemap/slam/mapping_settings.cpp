@@ -1,0 +1,134 @@
+#include "minemap/slam/mapping_settings.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace minemap {
+
+const char* to_string(MatchingMode mode) { return name_in(kMatchingModeNames, mode); }
+MatchingMode parse_matching_mode(const std::string& text) { return parse_named(kMatchingModeNames, text, "mode"); }
+const char* to_string(Reduction reduction) { return name_in(kReductionNames, reduction); }
+Reduction parse_reduction(const std::string& text) { return parse_named(kReductionNames, text, "reduction"); }
+const char* to_string(Preset preset) { return name_in(kPresetNames, preset); }
+Preset parse_preset(const std::string& text) { return parse_named(kPresetNames, text, "preset"); }
+
+IcpSettings MappingSettings::default_icp() {
+  IcpSettings icp;
+  icp.refine_pair_dist_fraction = 0.3f;
+  icp.accelerate = true;
+  icp.termination.min_translation_step_cm = 0.1;
+  icp.termination.min_rotation_step_deg = 0.01;
+  return icp;
+}
+
+IcpSettings MappingSettings::simultaneous_icp() {
+  IcpSettings icp;
+  icp.refine_pair_dist_fraction = 0.4f;
+  icp.accelerate = true;
+  return icp;
+}
+
+MappingSettings MappingSettings::simultaneous() {
+  MappingSettings settings;
+  settings.mode = MatchingMode::kSimultaneous;
+  settings.reduction = Reduction::kSlices;
+  settings.icp = simultaneous_icp();
+  settings.loops.enabled = false;  // the relaxation is the paper's own
+  return settings;
+}
+
+MappingSettings MappingSettings::paper() {
+  MappingSettings settings = simultaneous();
+  settings.icp = IcpSettings::paper();
+  settings.dense_models = false;
+  settings.max_relaxation_neighbours = 0;
+  settings.max_relaxation_matches_per_scan = 0;
+  settings.relaxation_min_step_cm = 0.0;
+  settings.relaxation_min_step_deg = 0.0;
+  return settings;
+}
+
+MappingSettings MappingSettings::preset(Preset preset) {
+  switch (preset) {
+    case Preset::kDefault: return {};
+    case Preset::kSimultaneous: return simultaneous();
+    case Preset::kPaper: return paper();
+  }
+  return {};
+}
+
+IcpSettings MappingSettings::pairwise_icp() const {
+  IcpSettings pairwise = icp;
+  pairwise.termination.min_pairs = std::min(pairwise.termination.min_pairs, min_overlap_pairs);
+  return pairwise;
+}
+
+IcpSettings MappingSettings::relaxation_icp() const {
+  IcpSettings relaxation = pairwise_icp();
+  if (relaxation_min_step_cm > 0.0) relaxation.termination.min_translation_step_cm = relaxation_min_step_cm;
+  if (relaxation_min_step_deg > 0.0) relaxation.termination.min_rotation_step_deg = relaxation_min_step_deg;
+  return relaxation;
+}
+
+bool MappingSettings::voxel_models() const {
+  return dense_models && model_voxel_cm > 0.0f && model_voxel_cm < voxel_cm;
+}
+
+bool MappingSettings::needs_planes() const {
+  return health.enabled || (loops.enabled && loops.information_from_geometry);
+}
+
+void MappingSettings::validate() const {
+  filter.validate();
+  icp.validate();
+  if (tree.bucket_size < 1) throw std::invalid_argument("kd-tree bucket size must be >= 1");
+  if (unstructured_point_stride < 1) throw std::invalid_argument("point stride must be >= 1");
+  if (model_slice_stride < 1) throw std::invalid_argument("model slice stride must be >= 1");
+  if (min_overlap_pairs < 0) throw std::invalid_argument("the overlap threshold must be >= 0 pairs");
+  if (max_relaxation_matches_per_scan < 0) throw std::invalid_argument("the relaxation cap must be >= 0");
+  if (!(plane_cell_cm > 0.0f) || !std::isfinite(plane_cell_cm)) {
+    throw std::invalid_argument("the planes' cell must be a finite length > 0 cm");
+  }
+  if (!(relaxation_min_step_cm >= 0.0) || !(relaxation_min_step_deg >= 0.0) || !std::isfinite(relaxation_min_step_cm) ||
+      !std::isfinite(relaxation_min_step_deg)) {
+    throw std::invalid_argument("the relaxation's convergence thresholds must be finite and >= 0");
+  }
+  if (max_relaxation_neighbours < 0) throw std::invalid_argument("the relaxation's neighbour cap must be >= 0");
+  for (const float factor : retry_bound_factors) {
+    if (!(factor > 1.0f) || !std::isfinite(factor)) throw std::invalid_argument("retry bound factors must be > 1");
+  }
+  if (!(max_retry_bound_cm > 0.0f)) throw std::invalid_argument("the widest retry bound must be > 0 cm");
+  loops.validate();
+  health.validate();
+  if (reduction == Reduction::kVoxel && (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm))) {
+    throw std::invalid_argument("the voxel size must be a finite length > 0 cm");
+  }
+  if (!(model_voxel_cm >= 0.0f) || !std::isfinite(model_voxel_cm)) {
+    throw std::invalid_argument("the model voxel size must be a finite length >= 0 cm");
+  }
+  if (!(metascan_margin_cm >= 0.0) || !std::isfinite(metascan_margin_cm)) {
+    throw std::invalid_argument("the metascan margin must be a finite length >= 0 cm");
+  }
+}
+
+void LoopClosureSettings::validate() const {
+  if (min_scan_gap < 2) throw std::invalid_argument("a loop must join scans at least 2 apart");
+  if (!(max_distance_cm > 0.0) || !std::isfinite(max_distance_cm)) {
+    throw std::invalid_argument("the loop candidates' distance must be a finite length > 0 cm");
+  }
+  if (!(min_path_cm >= 0.0) || !std::isfinite(min_path_cm)) {
+    throw std::invalid_argument("a loop's least drive must be a finite length >= 0 cm");
+  }
+  for (const float factor : bound_factors) {
+    if (!(factor >= 1.0f) || !std::isfinite(factor)) throw std::invalid_argument("loop bound factors must be >= 1");
+  }
+  if (!(graph.translation_sigma_cm > 0.0) || !(graph.rotation_sigma_rad > 0.0) || graph.max_iterations < 1) {
+    throw std::invalid_argument("the pose graph needs sigmas > 0 and at least one iteration");
+  }
+  if (!(min_information_fraction > 0.0) || !(min_information_fraction <= 1.0)) {
+    throw std::invalid_argument("the information floor must be in (0, 1]");
+  }
+}
+
+}  // namespace minemap

@@ -1,0 +1,176 @@
+#pragma once
+// Everything map_survey takes (paper, section IV.B, and what minemap adds around it): the matching
+// mode, the reduction, the ICP, the relaxation, loop closing and the health check; the presets; the
+// ICPs derived from them (pairwise_icp(), relaxation_icp()); validation. Every default is a member
+// initialiser here (or in the struct it embeds), written once; the command line binds its options
+// to these fields, so `minemap map --help` shows them, and report.json records them.
+//
+// Thread-safety: plain values.
+#include <string>
+#include <vector>
+
+#include "minemap/core/name_table.hpp"
+#include "minemap/filter/slice_filter.hpp"
+#include "minemap/registration/health.hpp"
+#include "minemap/registration/icp.hpp"
+#include "minemap/search/kdtree.hpp"
+#include "minemap/slam/pose_graph.hpp"
+
+namespace minemap {
+
+enum class MatchingMode { kPairwise, kIncremental, kSimultaneous };
+inline constexpr std::array<EnumName<MatchingMode>, 3> kMatchingModeNames{
+    {{MatchingMode::kPairwise, "pairwise"},
+     {MatchingMode::kIncremental, "incremental"},
+     {MatchingMode::kSimultaneous, "simultaneous"}}};
+const char* to_string(MatchingMode mode);
+MatchingMode parse_matching_mode(const std::string& text);  ///< a name of kMatchingModeNames
+
+/// How each scan is reduced before matching.
+enum class Reduction {
+  kSlices,  ///< the paper's slice filter (median, 10 cm along each slice, every third slice)
+  kVoxel,   ///< the mean of each voxel_cm cell, every point (filter/voxel_filter.hpp), as slam6D's octree
+};
+inline constexpr std::array<EnumName<Reduction>, 2> kReductionNames{
+    {{Reduction::kSlices, "slices"}, {Reduction::kVoxel, "voxel"}}};
+const char* to_string(Reduction reduction);
+Reduction parse_reduction(const std::string& text);  ///< a name of kReductionNames
+
+/// The named starting points of MappingSettings (MappingSettings::preset).
+enum class Preset {
+  kDefault,       ///< MappingSettings{}: voxel means, the metascan, loops
+  kSimultaneous,  ///< the paper's relaxation on slice-filtered scans, minemap's ICP
+  kPaper,         ///< the paper's method as published
+};
+inline constexpr std::array<EnumName<Preset>, 3> kPresetNames{
+    {{Preset::kDefault, "default"}, {Preset::kSimultaneous, "simultaneous"}, {Preset::kPaper, "paper"}}};
+const char* to_string(Preset preset);
+Preset parse_preset(const std::string& text);  ///< a name of kPresetNames
+
+/// Closing loops (pairwise and incremental matching; slam/loop_closing.cpp, slam/pose_graph.hpp).
+/// After the last scan, a scan that stands near one at least min_scan_gap scans earlier is matched
+/// against it; each trusted match is an edge of the scan graph, with the chain of matches from scan
+/// to scan, and a global relaxation of the graph spreads what the loop measured over the whole
+/// loop, as 3DTK's LUM does. While matching, the metascan then holds only the last min_scan_gap
+/// scans, so a loop is closed by the relaxation, not by one scan's jump where the drive meets its
+/// start.
+struct LoopClosureSettings {
+  bool enabled = true;
+  int min_scan_gap = 12;             ///< a loop joins scans at least this many apart (48 m at 4 m steps)
+  double max_distance_cm = 1000.0;   ///< candidates: scans whose positions are this close...
+  /// ...with at least this much drive between them (along the scan positions): in a survey of
+  /// scans half a metre apart, 12 scans back is still the same stretch of tunnel, not a loop.
+  double min_path_cm = 4000.0;
+  /// The pair bounds a loop match tries, coarse to fine, until one is trusted: what has drifted
+  /// further than this over the loop is not closed (and said so).
+  std::vector<float> bound_factors = {1.0f, 4.0f, 16.0f};
+  /// Each edge's information from its match's geometry (point-to-plane, on the planes of the scan it
+  /// ends at: MappingSettings::plane_cell_cm), as LUM takes its covariances from the point pairs: the
+  /// relaxation then bends a step along what its match could not see (a slide along a tunnel) rather
+  /// than every step alike. Off: every edge has graph's sigmas, alike in every direction.
+  bool information_from_geometry = true;
+  /// Every direction keeps at least this fraction of graph's information, however blind its match.
+  double min_information_fraction = 0.01;
+  PoseGraphSettings graph;
+  void validate() const;
+  bool operator==(const LoopClosureSettings&) const = default;
+};
+
+/// Everything map_survey takes. MappingSettings{} is minemap's default, the whole-survey mode: each
+/// scan, reduced to 15 cm voxel means, is matched once against the metascan of the registered scans
+/// near it (10 cm voxel means), with default_icp() (25 cm, then 7.5 cm). simultaneous() is the
+/// paper's queue-based relaxation on slice-filtered scans with minemap's ICP (the default before
+/// 2026-12); paper() is the paper's method as published. The figures behind each choice, and
+/// against 3DTK's slam6D, are in docs/benchmarks.md.
+struct MappingSettings {
+  MatchingMode mode = MatchingMode::kIncremental;
+  bool filter_enabled = true;             ///< the slice filter (reduction kSlices, scans with slices)
+  SliceFilterSettings filter;
+  /// kVoxel reduces every scan, sliced or not, to voxel means (the slice filter does not apply).
+  Reduction reduction = Reduction::kVoxel;
+  float voxel_cm = 15.0f;                 ///< kVoxel: the data's voxel size
+  /// kVoxel with dense_models: models are the voxel means at this finer size (0 or >= voxel_cm:
+  /// the data clouds themselves).
+  float model_voxel_cm = 10.0f;
+  int unstructured_point_stride = 1;      ///< kSlices, scans without slices: keep every n-th point
+  KdTreeSettings tree;
+  IcpSettings icp = default_icp();
+  /// Models (the scans a scan is matched *against*) may be denser than the data being matched, as
+  /// in KISS-ICP's double downsampling: a pair then measures the distance to the other scan's
+  /// surface rather than to its sampling, which removes much of point-to-point ICP's bias on
+  /// reduced data. kVoxel: models are model_voxel_cm means. kSlices: a model keeps every
+  /// `model_slice_stride`-th slice, filtered otherwise as `filter` says (scans without slices:
+  /// every point). Off: models are the data clouds, as in the paper.
+  bool dense_models = true;
+  int model_slice_stride = 1;
+  /// kIncremental: the metascan keeps the model points within the new scan's box (at its predicted
+  /// pose) grown by the pair bound and this: the largest correction ICP is expected to make.
+  double metascan_margin_cm = 200.0;
+  /// The paper: scans overlap iff more than this many pairs (by default ICP's own minimum, 250).
+  /// pairwise_icp() never asks for more pairs than this: a pair of scans that overlaps can be
+  /// registered.
+  int min_overlap_pairs = IcpTermination{}.min_pairs;
+  double moved_translation_cm = 5.0;      ///< step 3c: a match "moved" the scan beyond this...
+  double moved_rotation_deg = 0.25;       ///< ...or this
+  /// kSimultaneous, step 3: a scan is matched against the union of at most this many scans that
+  /// overlap it, the nearest first (0: every one, as the paper). Where every scan sees every other
+  /// (a hall, a handheld loop) the union, and the cost of each new scan, would grow with the survey.
+  int max_relaxation_neighbours = 8;
+  /// kSimultaneous, step 3: matches after one new scan. What is still queued then waits for the
+  /// next scan (the queue persists, the new scan goes first), and after the last scan the queue is
+  /// matched until it is empty or 2 x scans matches were made: the cost per new scan stays flat as
+  /// the survey grows (docs/benchmarks.md, time per scan). 0: the queue is emptied after every scan,
+  /// as the paper, with at most 4 x scans so far matches.
+  int max_relaxation_matches_per_scan = 8;
+  /// kSimultaneous, step 3: a relaxation match starts where its scan already sits, so it is
+  /// converged once a step moves less than this and turns less than relaxation_min_step_deg: still
+  /// well under the 1.5 cm range noise, with about half the iterations of ICP's own 0.01 cm /
+  /// 0.001 deg at the same error (docs/benchmarks.md; 0.1 cm / 0.01 deg saved more and lost
+  /// accuracy). 0: ICP's own thresholds, as paper() keeps (relaxation_icp()).
+  double relaxation_min_step_cm = 0.03;
+  double relaxation_min_step_deg = 0.003;
+  /// Every match is judged (registration/health.hpp); a doubtful one is named in ScanOutcome::health.
+  HealthSettings health;
+  /// Each scan's surfaces are cut into cubes of this size, and a plane fitted in each (a normal):
+  /// what the health's constraint test and the loop edges' information measure with.
+  float plane_cell_cm = 50.0f;
+  /// Pairwise and incremental matching: a doubtful match is tried again from the same start at these
+  /// multiples of the pair bound, coarse to fine, until one is trusted (1 m, then 4 m for 25 cm):
+  /// a start out of the 25 cm bound's reach (LiDAR without odometry) then still ends right, and
+  /// a survey whose matches are all trusted pays nothing. Empty: no retries.
+  std::vector<float> retry_bound_factors = {4.0f, 16.0f};
+  /// No retry starts wider than this: at tens of metres every surface pairs with some other one.
+  float max_retry_bound_cm = 400.0f;
+  LoopClosureSettings loops;
+
+  /// The default preset's ICP: the paper's schedule, then a refinement at 7.5 cm (0.3 x 25 cm),
+  /// Anderson-accelerated, a phase converged when a step moves less than 1 mm and turns less than
+  /// 0.01 deg (1.7 mm at 10 m), well under the 1.5 cm range noise (docs/benchmarks.md: half the
+  /// iterations on the default survey of ICP's own thresholds, the same error per step).
+  static IcpSettings default_icp();
+  /// The simultaneous preset's ICP: the paper's schedule, then a refinement at 10 cm (0.4 x 25 cm),
+  /// Anderson-accelerated, with ICP's own convergence thresholds.
+  static IcpSettings simultaneous_icp();
+  /// The paper's simultaneous matching (queue-based relaxation) of slice-filtered scans against
+  /// dense models, with simultaneous_icp().
+  static MappingSettings simultaneous();
+  /// The paper's method: simultaneous matching, slice filter, models reduced like the data, plain
+  /// ICP at 25 cm (Table I's rows).
+  static MappingSettings paper();
+  static MappingSettings preset(Preset preset);
+
+  /// What every match of a scan against others runs (steps 1 and 3, retries, loop matches and the
+  /// health check's bound): `icp`, asking for no more pairs than the overlap test.
+  IcpSettings pairwise_icp() const;
+  /// Step 3's matches: pairwise_icp() converged at relaxation_min_step_cm / _deg (where > 0).
+  IcpSettings relaxation_icp() const;
+  /// Whether scans keep a separate, denser model cloud of voxel means (kVoxel).
+  bool voxel_models() const;
+  /// Whether scans need their planes (the health's constraint test, loop edges' information).
+  bool needs_planes() const;
+  /// Throws std::invalid_argument naming the bad setting (map_survey calls it once, at entry).
+  void validate() const;
+  bool operator==(const MappingSettings&) const = default;
+};
+
+}  // namespace minemap

@@ -1,0 +1,16 @@
+#pragma once
+// What a mapping run tells its caller while it runs, and how the caller stops it.
+#include <cstddef>
+#include <functional>
+#include <string>
+
+namespace minemap {
+
+/// Reports progress: scans done of total, and a short phase name ("filtering", the mode's name).
+/// Called from the thread that runs the mapping.
+using ProgressCallback = std::function<void(std::size_t done, std::size_t total, const std::string& phase)>;
+/// Asked between scans (and between relaxation and loop matches): true stops the run, which returns
+/// what it finished (MappingResult::interrupted). Called from the thread that runs the mapping.
+using StopRequested = std::function<bool()>;
+
+}  // namespace minemap

@@ -1,0 +1,125 @@
+#include "minemap/slam/scan_preparation.hpp"
+
+#include <tbb/parallel_for.h>
+
+#include "minemap/filter/voxel_filter.hpp"
+
+namespace minemap::detail {
+
+ScanPreparation::VoxelMeans ScanPreparation::voxel_means(const Scan& scan) const {
+  VoxelMeans means;
+  if (settings_.reduction != Reduction::kVoxel) return means;
+  means.data = voxel_mean_filter(scan.points_cm, settings_.voxel_cm);
+  if (settings_.voxel_models()) means.model = voxel_mean_filter(scan.points_cm, settings_.model_voxel_cm);
+  return means;
+}
+
+/// The denser model cloud of a scan that is not reduced to voxel means (MappingSettings::
+/// dense_models); `dense` false (and no points) when it would equal the data.
+std::vector<Eigen::Vector3f> ScanPreparation::filtered_model(const Scan& scan, bool& dense) const {
+  const bool filtered = scan.has_slices() && settings_.filter_enabled;
+  dense = false;
+  if (!settings_.dense_models) return {};
+  if (filtered && settings_.model_slice_stride < settings_.filter.slice_stride) {
+    SliceFilterSettings model_filter = settings_.filter;
+    model_filter.slice_stride = settings_.model_slice_stride;
+    dense = true;
+    return backend_.filter_slices(scan, model_filter).points_cm;
+  }
+  if (!filtered && settings_.unstructured_point_stride > 1) {
+    dense = true;
+    return thin_unstructured(scan, 1);
+  }
+  return {};
+}
+
+ScanPreparation::Reduced ScanPreparation::reduce(const Scan& scan, VoxelMeans voxel, RunControl& control) {
+  Reduced reduced;
+  control.timed(&StageTimes::filter_s, [&] {
+    std::vector<Eigen::Vector3f> points;
+    if (settings_.reduction == Reduction::kVoxel) {
+      points = std::move(voxel.data);
+      reduced.has_model = !voxel.model.empty();
+      reduced.model = std::move(voxel.model);
+    } else {
+      if (scan.has_slices() && settings_.filter_enabled) {
+        SliceFilterResult filtered = backend_.filter_slices(scan, settings_.filter);
+        reduced.outliers_replaced = filtered.outliers_replaced;
+        points = std::move(filtered.points_cm);
+      } else {
+        if (!scan.has_slices() && settings_.filter_enabled) skipped_slice_filter_ = true;
+        points = thin_unstructured(scan, settings_.unstructured_point_stride);
+      }
+      reduced.model = filtered_model(scan, reduced.has_model);
+    }
+    reduced.data = std::move(points);
+  });
+  const std::size_t stride = static_cast<std::size_t>(settings_.health.probe_stride);
+  if (settings_.health.enabled && stride > 1) {
+    for (std::size_t k = 0; k < reduced.data.size(); k += stride) reduced.probe.push_back(reduced.data[k]);
+    reduced.has_probe = true;
+  }
+  return reduced;
+}
+
+PreparedScan ScanPreparation::prepare(const Scan& scan, RunControl& control) {
+  VoxelMeans voxel = control.timed(&StageTimes::filter_s, [&] { return voxel_means(scan); });
+  Reduced reduced = reduce(scan, std::move(voxel), control);
+  PreparedScan prepared;
+  prepared.points_in = scan.size();
+  prepared.outliers_replaced = reduced.outliers_replaced;
+  prepared.used_points_cm = std::make_shared<const std::vector<Eigen::Vector3f>>(reduced.data);
+  control.timed(&StageTimes::tree_build_s, [&] {
+    prepared.cloud = backend_.prepare(std::move(reduced.data), settings_.tree);
+    prepared.model_cloud = reduced.has_model ? backend_.prepare(std::move(reduced.model), settings_.tree) : prepared.cloud;
+    prepared.probe = reduced.has_probe ? backend_.prepare(std::move(reduced.probe), settings_.tree) : prepared.cloud;
+    if (settings_.needs_planes()) prepared.planes.emplace(prepared.model_cloud->points(), settings_.plane_cell_cm);
+  });
+  return prepared;
+}
+
+std::vector<PreparedScan> ScanPreparation::prepare_all(const std::vector<Scan>& scans, RunControl& control) {
+  const std::size_t n = scans.size();
+  // Voxel means are a host computation (the same bits for every backend), one scan per task.
+  std::vector<VoxelMeans> voxel(n);
+  control.timed(&StageTimes::filter_s, [&] {
+    if (settings_.reduction != Reduction::kVoxel) return;
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) { voxel[i] = voxel_means(scans[i]); });
+  });
+  std::vector<PreparedScan> prepared(n);
+  std::vector<std::vector<Eigen::Vector3f>> data(n), models, probes;
+  std::vector<bool> has_model(n, false), has_probe(n, false);
+  for (std::size_t i = 0; i < n; ++i) {  // in order: the slice filter runs on the backend
+    Reduced reduced = reduce(scans[i], std::move(voxel[i]), control);
+    prepared[i].points_in = scans[i].size();
+    prepared[i].outliers_replaced = reduced.outliers_replaced;
+    prepared[i].used_points_cm = std::make_shared<const std::vector<Eigen::Vector3f>>(reduced.data);
+    data[i] = std::move(reduced.data);
+    has_model[i] = reduced.has_model;
+    has_probe[i] = reduced.has_probe;
+    if (reduced.has_model) models.push_back(std::move(reduced.model));
+    if (reduced.has_probe) probes.push_back(std::move(reduced.probe));
+    control.report(i + 1, "filtering");
+  }
+  // Every tree at once (the CPU backend builds them in parallel); clouds in scan order.
+  control.timed(&StageTimes::tree_build_s, [&] {
+    auto data_clouds = backend_.prepare_many(std::move(data), settings_.tree);
+    auto model_clouds = backend_.prepare_many(std::move(models), settings_.tree);
+    auto probe_clouds = backend_.prepare_many(std::move(probes), settings_.tree);
+    std::size_t next_model = 0, next_probe = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      PreparedScan& scan = prepared[i];
+      scan.cloud = std::move(data_clouds[i]);
+      scan.model_cloud = has_model[i] ? std::move(model_clouds[next_model++]) : scan.cloud;
+      scan.probe = has_probe[i] ? std::move(probe_clouds[next_probe++]) : scan.cloud;
+    }
+    if (settings_.needs_planes()) {
+      tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+        prepared[i].planes.emplace(prepared[i].model_cloud->points(), settings_.plane_cell_cm);
+      });
+    }
+  });
+  return prepared;
+}
+
+}  // namespace minemap::detail

@@ -1,0 +1,67 @@
+#pragma once
+// Internal (not installed). Paper, section IV.C, and the voxel means: one scan in, a prepared scan
+// out. A scan is reduced as MappingSettings say (voxel means, or the paper's slice filter, or every
+// n-th point of a scan without slices), with a denser model cloud where the settings ask for one
+// and the health check's probe; then each cloud gets its kd-tree on the backend, and the model its
+// planes. map_survey prepares every scan at once (prepare_all: the voxel means in parallel, every
+// tree in one prepare_many call); `minemap watch` one at a time (prepare): both reduce each scan
+// with the same function and build the same trees.
+//
+// Thread-safety: uses the backend, one thread at a time.
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "minemap/backend/compute_backend.hpp"
+#include "minemap/core/scan.hpp"
+#include "minemap/registration/match_information.hpp"
+#include "minemap/slam/mapping_settings.hpp"
+#include "minemap/slam/run_control.hpp"
+
+namespace minemap::detail {
+
+/// A scan's clouds as the matcher uses them. Immutable once made.
+struct PreparedScan {
+  std::shared_ptr<const PreparedCloud> cloud;        ///< data: matched against others
+  std::shared_ptr<const PreparedCloud> model_cloud;  ///< model: others are matched against it (may be `cloud`)
+  std::shared_ptr<const PreparedCloud> probe;        ///< every health.probe_stride-th data point: what judging searches
+  std::optional<SurfaceNormals> planes;              ///< its model's planes, own frame (health, loop edges)
+  std::shared_ptr<const std::vector<Eigen::Vector3f>> used_points_cm;  ///< the data points, for the map
+  std::size_t points_in = 0;
+  std::size_t outliers_replaced = 0;
+  const SurfaceNormals* planes_or_null() const { return planes ? &*planes : nullptr; }
+};
+
+class ScanPreparation {
+ public:
+  ScanPreparation(const MappingSettings& settings, ComputeBackend& backend) : settings_(settings), backend_(backend) {}
+
+  /// One scan, alone (its trees by prepare).
+  PreparedScan prepare(const Scan& scan, RunControl& control);
+  /// Every scan, in order (the voxel means in parallel, the trees in one prepare_many call each for
+  /// data, models and probes); reports "filtering" after each scan is reduced.
+  std::vector<PreparedScan> prepare_all(const std::vector<Scan>& scans, RunControl& control);
+  /// True once a scan without slices skipped the slice filter it was asked for (a note).
+  bool skipped_slice_filter() const { return skipped_slice_filter_; }
+
+ private:
+  /// A scan's clouds before their trees: data, the denser model (if any), the health probe (if any).
+  struct Reduced {
+    std::vector<Eigen::Vector3f> data, model, probe;
+    bool has_model = false, has_probe = false;
+    std::size_t outliers_replaced = 0;
+  };
+  struct VoxelMeans {
+    std::vector<Eigen::Vector3f> data, model;
+  };
+  VoxelMeans voxel_means(const Scan& scan) const;
+  /// `scan` reduced as the settings say (voxel: its voxel means, computed before).
+  Reduced reduce(const Scan& scan, VoxelMeans voxel, RunControl& control);
+  std::vector<Eigen::Vector3f> filtered_model(const Scan& scan, bool& dense) const;
+
+  const MappingSettings& settings_;
+  ComputeBackend& backend_;
+  bool skipped_slice_filter_ = false;
+};
+
+}  // namespace minemap::detail

@@ -1,0 +1,68 @@
+#include "minemap/slam/scan_registration.hpp"
+
+#include <cstdio>
+
+namespace minemap::detail {
+
+RegistrationHealth ScanRegistration::judge(const PreparedScan& scan, const Pose& pose, const Pose& start,
+                                           std::span<const WorldModel> models, float reach_bound_cm) const {
+  return judge_registration(backend_, *scan.probe, pose, start, models, icp_, settings_.health, reach_bound_cm,
+                            scan.planes_or_null());
+}
+
+WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, const Pose& start,
+                                                  std::span<const WorldModel> models, float bound_cm) const {
+  IcpSettings wide = icp_;
+  wide.max_pair_dist_cm = bound_cm;
+  wide.refine_pair_dist_fraction = 0.0f;
+  WideMatch match;
+  const IcpResult coarse = register_icp(backend_, *scan.cloud, start, models, wide);
+  match.iterations += coarse.iterations();
+  if (!coarse.ok()) {
+    match.failure = to_string(coarse.stop);
+    return match;
+  }
+  IcpResult fine = register_icp(backend_, *scan.cloud, coarse.world_from_data, models, icp_);
+  match.iterations += fine.iterations();
+  if (!fine.ok()) {
+    match.failure = to_string(fine.stop);
+    return match;
+  }
+  match.health = judge(scan, fine.world_from_data, start, models, bound_cm);
+  match.fine = std::move(fine);
+  return match;
+}
+
+ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& start,
+                                          const ModelsForBound& models_for) const {
+  ScanMatch match;
+  const std::vector<WorldModel> models = models_for(icp_.max_pair_dist_cm, start);
+  match.first = register_icp(backend_, *scan.cloud, start, models, icp_);
+  match.iterations = match.first.iterations();
+  if (!match.first.ok()) return match;
+  match.health = judge(scan, match.first.world_from_data, start, models);
+  std::string tried;
+  for (const float factor : settings_.retry_bound_factors) {
+    if (!match.health.doubtful()) return match;
+    const float bound = factor * icp_.max_pair_dist_cm;
+    if (bound > settings_.max_retry_bound_cm) break;
+    const std::vector<WorldModel> wide_models = models_for(bound, match.first.world_from_data);
+    WideMatch retry = match_from_wide_bound(scan, start, wide_models, bound);
+    match.iterations += retry.iterations;
+    if (!retry.fine) continue;
+    if (retry.health.doubtful()) {
+      char text[32];
+      std::snprintf(text, sizeof text, "%g cm", double(bound));
+      tried += (tried.empty() ? "" : ", ") + std::string(text);
+      continue;
+    }
+    retry.health.retry_bound_cm = bound;
+    match.retry = std::move(retry.fine);
+    match.health = std::move(retry.health);
+    return match;
+  }
+  if (!tried.empty()) match.health.doubt += " (tried again from " + tried + ": still doubtful)";
+  return match;
+}
+
+}  // namespace minemap::detail

@@ -1,0 +1,74 @@
+#pragma once
+// Internal (not installed). One scan registered against the scans it is matched with, and judged
+// (registration/health.hpp); a doubtful match tried again from the same start at wider bounds,
+// coarse to fine (MappingSettings::retry_bound_factors), and kept only when trusted. Loop matches use
+// the same coarse-to-fine step (match_from_wide_bound). Everything here returns a value and writes
+// no state: the matcher places the scan (SurveyState::place / fail).
+//
+// Thread-safety: uses the backend, one thread at a time.
+#include <functional>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "minemap/backend/compute_backend.hpp"
+#include "minemap/registration/health.hpp"
+#include "minemap/registration/icp.hpp"
+#include "minemap/slam/mapping_settings.hpp"
+#include "minemap/slam/scan_preparation.hpp"
+
+namespace minemap::detail {
+
+/// A scan's registration: the match at the pair bound and, when that was doubtful, the trusted
+/// retry that replaced it.
+struct ScanMatch {
+  IcpResult first;                 ///< from the start, at the pair bound
+  std::optional<IcpResult> retry;  ///< a trusted retry at a wider bound (it replaces `first`)
+  RegistrationHealth health;       ///< the verdict on the match kept (none when `first` failed)
+  int iterations = 0;              ///< every ICP iteration spent, retries included (Table I's step 1)
+  bool ok() const { return first.ok(); }
+};
+
+/// A match that starts at a wide bound and then runs the usual phases.
+struct WideMatch {
+  std::optional<IcpResult> fine;  ///< empty: an ICP run failed (`failure` says how)
+  RegistrationHealth health;
+  std::string failure;
+  int iterations = 0;             ///< both runs'
+};
+
+/// The models a scan is matched against, for a given pair bound (a metascan is cropped by it), chosen
+/// near where the scan stands (`standing`: its start for the first match, where that match put it
+/// for the retries).
+using ModelsForBound = std::function<std::vector<WorldModel>(float bound_cm, const Pose& standing)>;
+
+class ScanRegistration {
+ public:
+  ScanRegistration(const MappingSettings& settings, ComputeBackend& backend)
+      : settings_(settings), backend_(backend), icp_(settings.pairwise_icp()) {}
+
+  /// The ICP every match of a scan against others runs (MappingSettings::pairwise_icp).
+  const IcpSettings& icp() const { return icp_; }
+
+  /// Registers `scan` from `start` and judges the match; a doubtful one is tried again from the
+  /// same start at each wider bound, until one is trusted.
+  ScanMatch register_scan(const PreparedScan& scan, const Pose& start, const ModelsForBound& models_for) const;
+
+  /// ICP at `bound_cm` from `start` (no refinement), then the usual phases from where that ended,
+  /// judged with the reach of the wide bound.
+  WideMatch match_from_wide_bound(const PreparedScan& scan, const Pose& start, std::span<const WorldModel> models,
+                                  float bound_cm) const;
+
+  /// The health of `scan` at `pose`, moved there from `start`, against `models`, at the pair bound
+  /// (the reach test at `reach_bound_cm` when > 0).
+  RegistrationHealth judge(const PreparedScan& scan, const Pose& pose, const Pose& start,
+                           std::span<const WorldModel> models, float reach_bound_cm = 0.0f) const;
+
+ private:
+  const MappingSettings& settings_;
+  ComputeBackend& backend_;
+  IcpSettings icp_;
+};
+
+}  // namespace minemap::detail

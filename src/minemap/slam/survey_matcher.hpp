@@ -1,0 +1,84 @@
+#pragma once
+// Internal (not installed). The schedule of a mapping run, and nothing else: scans arrive (add, or
+// all at once in run), each starts where the mode predicts it and is matched (match_scan), and the
+// run is finished (the rest of the relaxation queue, then loops). The stages it calls:
+//   scan_preparation   reduce one scan, build its trees (paper IV.C)
+//   survey_state       where every scan stands; the one writer of poses
+//   local_map          the metascan, and the relaxation's union
+//   scan_registration  register and judge one scan, retry wider (paper IV.A, registration/)
+//   relaxation         the paper's queue (IV.B step 3)
+//   loop_closing       returns to known places and the pose graph
+//
+// Thread-safety: one thread at a time. A BackendError propagates (map_survey starts a fresh matcher
+// on a CPU backend); nothing here is reset by hand.
+#include <string>
+#include <vector>
+
+#include "minemap/backend/compute_backend.hpp"
+#include "minemap/slam/local_map.hpp"
+#include "minemap/slam/loop_closing.hpp"
+#include "minemap/slam/relaxation.hpp"
+#include "minemap/slam/run_control.hpp"
+#include "minemap/slam/scan_preparation.hpp"
+#include "minemap/slam/scan_registration.hpp"
+#include "minemap/slam/survey_state.hpp"
+
+namespace minemap::detail {
+
+class SurveyMatcher {
+ public:
+  /// `settings` must outlive the matcher (and be valid: MappingSettings::validate).
+  SurveyMatcher(const MappingSettings& settings, ComputeBackend& backend, RunControl control);
+
+  /// map_survey: every scan prepared at once (in parallel), then matched in order, then finished.
+  MappingResult run(const std::vector<Scan>& scans);
+  /// LiveMapper::add: one more scan, prepared alone (the same clouds as run's), then matched.
+  void add(const Scan& scan);
+  /// LiveMapper::restore: one more scan prepared, its outcome as a previous run left it.
+  void restore(const Scan& scan, const ScanOutcome& outcome);
+  /// A resume: the previous run's counters (iterations, matches, notes, times).
+  void restore_counters(const MappingResult& saved);
+  void restore_queue(const std::vector<std::size_t>& queue) { relaxation_.restore_queue(queue, state_.size()); }
+  /// What follows the last scan: the rest of the relaxation queue, then loop closing.
+  void finish();
+
+  /// The run so far, built from the state.
+  MappingResult result() const;
+  std::vector<std::size_t> queue() const { return relaxation_.queue(); }
+  std::size_t size() const { return state_.size(); }
+  const ScanOutcome& scan(std::size_t i) const { return state_.outcome(i); }
+
+ private:
+  /// Appends a prepared scan (and the note a skipped slice filter asks for).
+  void append(const Scan& scan, PreparedScan prepared);
+  /// Scan i, arrived: the mode's match, and for kSimultaneous the relaxation after it (steps 2 and
+  /// 3, within the per-scan budget).
+  void match_scan(std::size_t i);
+  /// Where scan i starts: scan i-1's registered pose, moved by the odometry step from i-1 to i
+  /// (3DTK's correction).
+  Pose predicted_start(std::size_t i) const;
+  /// Step 1 (and the pairwise mode): scan i against scan i-1. Incremental: against the metascan.
+  ScanMatch match_pairwise(std::size_t i, const Pose& start) const;
+  ScanMatch match_incremental(std::size_t i, const Pose& start) const;
+  void relax(std::size_t newest, int budget);
+
+  const MappingSettings& settings_;
+  ComputeBackend& backend_;
+  RunControl control_;
+  ScanPreparation preparation_;
+  SurveyState state_;
+  LocalMap local_map_;
+  ScanRegistration registration_;
+  Relaxation relaxation_;
+  LoopClosing loop_closing_;
+  // Counters of the run (MappingResult's).
+  std::string backend_name_;
+  std::vector<std::string> notes_;
+  int step1_iterations_ = 0, step3_iterations_ = 0, relaxation_matches_ = 0;
+  std::vector<LoopClosure> loops_;
+  bool interrupted_ = false;
+  std::size_t scans_matched_ = 0;
+  bool noted_unstructured_ = false;
+};
+
+}  // namespace minemap::detail
