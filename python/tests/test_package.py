@@ -327,3 +327,33 @@ def test_e57_survey_gets_its_registered_poses_back(small_survey, tmp_path):
     for i in range(6):
         header = written.get_header(i)
         assert np.allclose(header.translation, result.poses[i][:3, 3] + np.array(result.origin), atol=1e-6)
+
+
+def _write_ply(path: Path, points: np.ndarray) -> None:
+    """A binary little-endian PLY of float32 x y z."""
+    header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(points)}\n"
+              "property float x\nproperty float y\nproperty float z\nend_header\n").encode()
+    path.write_bytes(header + np.ascontiguousarray(points, dtype="<f4").tobytes())
+
+
+def test_map_laz_is_z_up_whichever_frame_the_survey_was_mapped_in(small_survey, tmp_path):
+    # A right-handed, z-up PLY survey (metres), mapped as it is and converted to 3DTK's frame
+    # (--right-handed-to-3dtk): map.laz is right-handed and z up both times, in the same place. The
+    # frame is the reader's to say (io::Survey::frame_3dtk); map.laz once took it from the format
+    # alone and came out in 3DTK's frame (y up) after the conversion.
+    _, scans = _georeferenced_scans(small_survey)
+    folder = tmp_path / "ply"
+    folder.mkdir()
+    for i, points in enumerate(scans):
+        _write_ply(folder / f"scan{i}.ply", points)
+    boxes = []
+    for name, extra in (("plain", {}), ("converted", {"right_handed_to_3dtk": True})):
+        minemap.map_survey(folder, out=tmp_path / name, threads=2, **extra)
+        laz = laspy.read(tmp_path / name / "map.laz")
+        xyz = np.stack([laz.x, laz.y, laz.z], axis=1)
+        boxes.append((xyz.min(axis=0), xyz.max(axis=0), xyz.mean(axis=0)))
+    every = np.concatenate(scans)
+    for low, high, mean in boxes:
+        # The survey's own axes: the drive runs along x, the roof is a few metres up z.
+        assert np.all(np.abs(low - every.min(axis=0)) < 0.5) and np.all(np.abs(high - every.max(axis=0)) < 0.5)
+    assert np.all(np.abs(boxes[0][2] - boxes[1][2]) < 0.05)

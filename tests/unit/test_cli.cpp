@@ -45,6 +45,36 @@ TEST(Cli, SimulateThenMapWritesEveryOutputAndReportsTruthErrors) {
   }
 }
 
+// `minemap --version` names the code, and report.json records the run: the version, the command
+// line as given, every option that decides the poses (settings) and the rest (run_options), so a
+// map can be reproduced from its folder alone.
+TEST(Cli, VersionAndAReportThatRecordsTheRun) {
+  TempDir dir;
+  std::string output;
+  ASSERT_EQ(run_cli("--version", &output), 0) << output;
+  ASSERT_EQ(output.rfind("minemap ", 0), 0u) << output;
+  const std::string version = output.substr(8, output.find('\n') - 8);
+  EXPECT_FALSE(version.empty());
+  const std::string survey = (dir / "survey").string(), out = (dir / "out").string();
+  ASSERT_EQ(run_cli("simulate --out " + survey + " --scans 2", &output), 0) << output;
+  ASSERT_EQ(run_cli("map " + survey + " --out " + out + " --backend cpu --voxel-cm 16 --quiet", &output), 0) << output;
+  std::ifstream in(dir / "out" / "report.json");
+  const auto report = nlohmann::json::parse(in);
+  EXPECT_EQ(report["version"], version);
+  const std::vector<std::string> line = {"minemap", "map", survey, "--out", out, "--backend", "cpu", "--voxel-cm", "16",
+                                         "--quiet"};
+  EXPECT_EQ(report["command_line"].get<std::vector<std::string>>(), line);
+  EXPECT_EQ(report["settings"]["voxel_cm"], 16);
+  EXPECT_EQ(report["settings"]["max_pair_dist_cm"], 25);
+  EXPECT_EQ(report["settings"]["retry_bound_factors"], nlohmann::json::array({4, 16}));
+  EXPECT_EQ(report["settings"]["mode"], "incremental");
+  EXPECT_EQ(report["settings"]["no_filter"], false);
+  EXPECT_FALSE(report["settings"].contains("threads"));
+  EXPECT_EQ(report["run_options"]["backend"], "cpu");
+  EXPECT_EQ(report["run_options"]["quiet"], true);
+  EXPECT_GT(report["settings"].size(), 50u);
+}
+
 // `simulate --loop` writes a survey that returns to its start; `map` closes the loop, says so, and
 // reports it; --no-loop-closing leaves it open.
 TEST(Cli, ALoopSurveyIsClosedAndReported) {
@@ -275,8 +305,10 @@ TEST(Cli, WatchEndsAsMapOfTheSameFolderAndResumes) {
     if (name == "report.json") {
       auto a = nlohmann::json::parse(test::read_text(entry.path()));
       auto b = nlohmann::json::parse(test::read_text(dir / "live" / name));
-      a.erase("timings_s");
-      b.erase("timings_s");
+      for (const char* key : {"timings_s", "command_line", "run_options"}) {  // how each run was asked for
+        a.erase(key);
+        b.erase(key);
+      }
       EXPECT_EQ(a, b);
     } else {
       EXPECT_TRUE(test::read_text(entry.path()) == test::read_text(dir / "live" / name)) << name;
