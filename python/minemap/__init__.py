@@ -26,11 +26,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from . import _core, formats
+from . import _core, exports, formats
 from ._core import BackendError, InputError, OutputError, __version__
 from .batch import batch  # many surveys on a Dask cluster; dask is imported only when it runs
 
-__all__ = ["__version__", "register", "map_survey", "read_survey", "simulate", "batch", "options", "RegistrationResult",
+__all__ = ["__version__", "export", "register", "map_survey", "read_survey", "simulate", "batch", "options", "RegistrationResult",
            "MappingResult", "Survey", "InputError", "BackendError", "OutputError", "formats"]
 
 
@@ -224,3 +224,13 @@ def _write_extra_outputs(out_dir: str, run: dict) -> None:
 
 _core.set_foreign_survey_reader(formats.read_foreign_survey)
 _core.set_extra_outputs(_write_extra_outputs)
+_core.set_export_writer(exports.write)
+
+
+def export(out, to, *, frame: str = "z-up", voxel_cm: float = 0.0, scans=None) -> dict:
+    """Writes the registered survey of the finished map in `out` (its report.json) to the file `to`,
+    every point of every scan with its attributes and scan index, as `minemap export OUT --to TO`:
+    .ply, .las, .laz, .copc.laz or .e57. frame="z-up" (metres, right-handed, z up) or "survey" (the
+    survey's own frame and unit); voxel_cm > 0 thins each scan; scans: names (default: every
+    registered scan). Returns {"scans", "points", "attributes", "completed", "warnings"}."""
+    return exports.export(out, to, frame=frame, voxel_cm=voxel_cm, scans=scans)

@@ -72,6 +72,8 @@ int run(const std::vector<std::string>& args, const Hooks& hooks) {
   const MapSubcommand map_command = add_map_command(app, map);
   WatchOptions watch_options;
   const MapSubcommand watch_command = add_watch_command(app, watch, watch_options);
+  ExportOptions export_options;
+  CLI::App* export_command = add_export_command(app, export_options, map.options);
 
   try {
     std::vector<std::string> reversed(args.rbegin(), args.rend());
@@ -79,9 +81,14 @@ int run(const std::vector<std::string>& args, const Hooks& hooks) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : code(ExitCode::kUsage);
   }
-  // `map` and `watch` stop at a scan boundary on Ctrl-C (SIGINT) or SIGTERM; simulate dies as usual.
+  // `map`, `watch` and `export` stop at a scan boundary on Ctrl-C (SIGINT) or SIGTERM; simulate
+  // dies as usual.
   std::optional<signals::InterruptHandlers> handlers;
-  if (*map_command.app || *watch_command.app) handlers.emplace();
+  if (*map_command.app || *watch_command.app || *export_command) handlers.emplace();
+  if (*export_command) {
+    return with_exit_codes([&] { return with_threads(map.options, [&] { return run_export(export_options, hooks); }); },
+                           {});
+  }
   if (*simulate) return with_exit_codes([&] { return with_threads(map.options, [&] { return run_simulate(sim); }); }, {});
   if (*watch_command.app) {
     return with_exit_codes(

@@ -23,6 +23,7 @@
 #include "minemap/backend/make_backend.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/report/map_output.hpp"
+#include "minemap/report/survey_export.hpp"
 #include "minemap/slam/survey_matching.hpp"
 
 namespace minemap::cli {
@@ -109,6 +110,7 @@ struct MapRun {
   BackendChoice backend;
   MappingResult result;  ///< interrupted: only the scans matched (survey.truth_cm cut alike)
   std::size_t survey_scans = 0;  ///< the survey's scan count (more than result's when interrupted)
+  std::vector<std::string> sources;  ///< each scan's file (report.json), in survey order
   double load_s = 0.0;
   /// The errors against the survey's reference poses (where it has them), computed once for the
   /// console and report.json alike.
@@ -119,11 +121,17 @@ struct MapRun {
 /// `extra_outputs` runs after them (the Python package writes map.laz and the E57 there).
 using ExtraOutputs = std::function<void(const fs::path& out_dir, const MapCommand& command, const MapRun& run)>;
 
+/// Writes an export in a format the C++ core does not write (LAS/LAZ, COPC, E57: the Python
+/// package), from the scans `scans` hands out, to `path` atomically; `stop` is asked between scans.
+using ExportWriter =
+    std::function<ExportSummary(SurveyExport& scans, const fs::path& path, const std::function<bool()>& stop)>;
+
 /// What an embedding program adds to the command line.
 struct Hooks {
   /// Polled between scans and relaxation matches, with SIGINT/SIGTERM: true stops the run there.
   std::function<bool()> stop_requested;
   ExtraOutputs extra_outputs;
+  ExportWriter export_writer;
 };
 
 /// Runs the command line (`args` without the program's name: {"map", "SURVEY", "--out", ...}) and

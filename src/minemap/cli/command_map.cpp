@@ -22,6 +22,7 @@ MapSubcommand add_map_command(CLI::App& app, MapCommand& command) {
 
 int run_map(const MapCommand& command, const Hooks& hooks) {
   const MapOptions& options = command.options;
+  begin_log(command.command_line);
   ProgressBar bar(!options.quiet);
   // Ctrl-C or SIGTERM stops the run between scans (and between relaxation matches); what was
   // matched by then is written below, marked partial, and the exit code is 130.
@@ -30,29 +31,33 @@ int run_map(const MapCommand& command, const Hooks& hooks) {
       [&] { return signals::interrupted() || (hooks.stop_requested && hooks.stop_requested()); });
   const MappingResult& result = run.result;
   if (!options.quiet) {
-    for (const auto& note : result.notes) std::printf("note: %s\n", note.c_str());
+    for (const auto& note : result.notes) say(stdout, "note: %s\n", note.c_str());
   }
   const Verdict verdict = judge_run(result, sources_of(run.survey));
   if (!write_despite(verdict, options)) return static_cast<int>(ExitCode::kRegistrationFailed);
   write_outputs(command, run, hooks.extra_outputs);
   if (result.interrupted) {
-    std::fprintf(stderr, "minemap: interrupted: wrote the %zu of %zu scans matched so far to %s (report.json: partial)\n",
-                 result.scans.size(), run.survey_scans, options.out.c_str());
+    say(stderr, "minemap: interrupted: wrote the %zu of %zu scans matched so far to %s (report.json: partial)\n",
+        result.scans.size(), run.survey_scans, options.out.c_str());
+    write_log(options.out, version());
     return static_cast<int>(ExitCode::kInterrupted);
   }
   if (signals::interrupted()) throw signals::Interrupted{};  // arrived while writing: the outputs are complete
   print_loops(options, result);
   if (!options.quiet) {
-    std::printf("matched %zu scans: %d ICP iterations pairwise, %d in %d relaxation matches; %.2f s filter, "
+    say(stdout, "matched %zu scans: %d ICP iterations pairwise, %d in %d relaxation matches; %.2f s filter, "
                 "%.2f s trees, %.2f s pairwise, %.2f s relaxation\n",
                 result.scans.size(), result.step1_icp_iterations, result.step3_icp_iterations,
                 result.relaxation_matches, result.times.filter_s, result.times.tree_build_s, result.times.pairwise_s,
                 result.times.relaxation_s);
+    print_summary(result);
     print_truth(run);
-    std::printf("wrote %s (frames, poses, trajectory.tum, map.ply, report.json, top.png, side.png, map.html)\n",
-                options.out.c_str());
+    say(stdout, "wrote %s (frames, poses, trajectory.tum, map.ply, report.json, top.png, side.png, map.html, "
+        "minemap.log)\n", options.out.c_str());
   }
-  return exit_code_of(verdict, options, result.scans.size());
+  const int code = exit_code_of(verdict, options, result.scans.size());
+  write_log(options.out, version());
+  return code;
 }
 
 }  // namespace minemap::cli

@@ -97,8 +97,9 @@ io::Survey Watch::read_scans(std::size_t first, std::size_t count) {
   io::SurveyReadSettings read = survey_read_settings(options_);
   read.first_scan = first;
   read.max_scans = count;
-  io::Survey part = io::read_survey(options_.survey, read);
   io::Survey& survey = run_.survey;
+  if (!survey.format.empty()) read.origin_cm = survey.origin_cm;  // the origin the first part chose
+  io::Survey part = io::read_survey(options_.survey, read);
   if (survey.format.empty()) {
     survey.format = part.format;
     survey.unit = part.unit;
@@ -110,7 +111,7 @@ io::Survey Watch::read_scans(std::size_t first, std::size_t count) {
     survey.truth_cm->insert(survey.truth_cm->end(), part.truth_cm->begin(), part.truth_cm->end());
   }
   for (const auto& warning : part.warnings) {
-    if (!options_.quiet) std::fprintf(stderr, "minemap: warning: %s\n", warning.c_str());
+    if (!options_.quiet) say(stderr, "minemap: warning: %s\n", warning.c_str());
   }
   return part;
 }
@@ -148,7 +149,7 @@ void Watch::resume() {
     live_.restore_queue(state.queue);
     live_.restore_counters(state.result);
   }
-  if (!options_.quiet) std::printf("resumed from %s: %zu scans matched before\n", state_path_.c_str(), k);
+  if (!options_.quiet) say(stdout, "resumed from %s: %zu scans matched before\n", state_path_.c_str(), k);
 }
 
 void Watch::check_order(const std::vector<std::string>& names) const {
@@ -178,7 +179,7 @@ bool Watch::add_ready(const std::vector<std::string>& names) {
     write_state(so_far, false);
     if (!options_.quiet) {
       const ScanOutcome& scan = live_.scan(live_.size() - 1);
-      std::printf("%s: read %.2f s, matched %.2f s, outputs %.2f s (%zu scans)%s%s\n", scan.name.c_str(), read_s,
+      say(stdout, "%s: read %.2f s, matched %.2f s, outputs %.2f s (%zu scans)%s%s\n", scan.name.c_str(), read_s,
                   scan.match_s, seconds_since(written), live_.size(), scan.health.doubtful() ? "; doubtful: " : "",
                   scan.health.doubtful() ? scan.health.doubt.c_str() : "");
       std::fflush(stdout);
@@ -193,6 +194,7 @@ bool Watch::add_ready(const std::vector<std::string>& names) {
 void Watch::write_snapshot(MappingResult result) {
   result.scans_matched = result.scans.size();
   run_.result = std::move(result);
+  run_.sources = sources_;
   run_.survey_scans = run_.result.scans.size();
   if (run_.survey.truth_cm && run_.survey.truth_cm->size() != run_.result.scans.size()) run_.survey.truth_cm.reset();
   run_.truth = compare_with_truth(run_.result, run_.survey.truth_cm);
@@ -212,28 +214,33 @@ void Watch::write_state(const MappingResult& unfinished, bool finished) const {
 /// Finishes as `map` does; the state keeps the unfinished run, which later scans continue.
 int Watch::finish() {
   const MappingResult unfinished = live_.result();
-  if (!options_.quiet) std::printf("finishing the map of %zu scans\n", live_.size());
+  if (!options_.quiet) say(stdout, "finishing the map of %zu scans\n", live_.size());
   with_threads(options_, [&] { live_.finish(); });
   MappingResult finished = live_.result();
   if (finished.interrupted) {
-    std::fprintf(stderr, "minemap: stopped while finishing: %s holds the map of the %zu scans matched before\n",
+    say(stderr, "minemap: stopped while finishing: %s holds the map of the %zu scans matched before\n",
                  options_.out.c_str(), live_.size());
     return static_cast<int>(ExitCode::kInterrupted);
   }
   write_snapshot(std::move(finished));
   write_state(unfinished, true);
   if (!options_.quiet) {
+    print_loops(options_, run_.result);
+    print_summary(run_.result);
     print_truth(run_);
-    std::printf("wrote the finished map of %zu scans to %s\n", live_.size(), options_.out.c_str());
+    say(stdout, "wrote the finished map of %zu scans to %s\n", live_.size(), options_.out.c_str());
   }
-  return exit_code_of(judge_run(run_.result, sources_), options_, run_.result.scans.size());
+  const int code = exit_code_of(judge_run(run_.result, sources_), options_, run_.result.scans.size());
+  write_log(options_.out, version());
+  return code;
 }
 
 int Watch::run() {
+  begin_log(command_.command_line);
   std::error_code error;
   if (fs::exists(state_path_, error)) resume();
   if (!options_.quiet) {
-    std::printf("watching %s (backend: %s); Ctrl-C finishes the map, a second Ctrl-C stops at once\n",
+    say(stdout, "watching %s (backend: %s); Ctrl-C finishes the map, a second Ctrl-C stops at once\n",
                 options_.survey.c_str(), backend_.message.c_str());
     std::fflush(stdout);
   }
@@ -250,12 +257,13 @@ int Watch::run() {
     }
   }
   if (signals::interrupted_twice()) {
-    std::fprintf(stderr, "minemap: stopped: %s holds the map of the %zu scans matched before (not finished)\n",
+    say(stderr, "minemap: stopped: %s holds the map of the %zu scans matched before (not finished)\n",
                  options_.out.c_str(), live_.size());
+    write_log(options_.out, version());
     return static_cast<int>(ExitCode::kInterrupted);
   }
   if (live_.size() == 0) {
-    std::fprintf(stderr, "minemap: no complete scan arrived in %s: nothing written\n", options_.survey.c_str());
+    say(stderr, "minemap: no complete scan arrived in %s: nothing written\n", options_.survey.c_str());
     return static_cast<int>(ExitCode::kEmptyInput);
   }
   return finish();

@@ -33,6 +33,19 @@ int run_watch(const MapCommand& command, const WatchOptions& watch, const std::s
               const Hooks& hooks);
 MapSubcommand add_watch_command(CLI::App& app, MapCommand& command, WatchOptions& watch);
 
+/// What `export` takes.
+struct ExportOptions {
+  fs::path out;     ///< a finished map's folder (its report.json)
+  fs::path to;      ///< the file to write; its extension picks the format
+  ExportSettings settings;
+  std::string frame = "z-up";
+  std::string scans;  ///< comma-separated scan names (empty: every registered scan)
+  bool quiet = false;
+};
+/// `minemap export` (command_export.cpp).
+int run_export(const ExportOptions& options, const Hooks& hooks);
+CLI::App* add_export_command(CLI::App& app, ExportOptions& options, MapOptions& process);
+
 struct SimulateOptions {
   fs::path out;
   int scans = 0;

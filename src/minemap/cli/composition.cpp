@@ -26,6 +26,7 @@ int thread_count(const MapOptions& options) {
 io::SurveyReadSettings survey_read_settings(const MapOptions& options) {
   io::SurveyReadSettings read;
   if (!options.unit.empty()) read.read.unit = parse_length_unit(options.unit);
+  read.read.attributes = kIntensity;  // the matching reads coordinates; the 3D view colours by intensity
   read.read.points_per_slice = options.points_per_slice;
   read.read.detect_slices = !options.no_slice_detection;
   read.read.right_handed_to_3dtk = options.right_handed_to_3dtk;
@@ -73,6 +74,7 @@ MapRun map_read_survey(const MapCommand& command, io::Survey survey, double load
   const MapOptions& options = command.options;
   MapRun run;
   run.survey = std::move(survey);
+  run.sources = sources_of(run.survey);
   run.load_s = load_s;
   // The composition root: the backend is made here, from the options and the environment.
   run.backend = make_backend_for(options);
@@ -102,7 +104,10 @@ MapOutputSettings output_settings(const MapCommand& command, const MapRun& run) 
   const MapOptions& options = command.options;
   MapOutputSettings output;
   output.unit = run.survey.unit;
-  output.up_axis = run.survey.frame_3dtk ? 1 : 2;  // the reader says which frame the survey is in
+  output.survey_in_3dtk_frame = run.survey.frame_3dtk;  // the reader says which frame the survey is in
+  output.survey = options.survey.empty() ? "" : fs::absolute(options.survey).lexically_normal().string();
+  output.format = run.survey.format;
+  output.sources = run.sources;
   output.title = "minemap " + std::string(to_string(command.settings.mode)) + ": " + options.survey.filename().string();
   output.load_s = run.load_s;
   output.backend_choice = run.backend.message;

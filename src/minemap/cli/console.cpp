@@ -3,11 +3,52 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdarg>
 #include <cstdio>
 
 #include "minemap/cli/exit_codes.hpp"
+#include "minemap/core/atomic_file.hpp"
 
 namespace minemap::cli {
+namespace {
+
+/// What the running command printed (OUT/minemap.log). One command at a time (cli::run is not
+/// reentrant).
+struct RunLog {
+  std::vector<std::string> command_line;
+  std::string text;
+};
+RunLog& run_log() {
+  static RunLog log;
+  return log;
+}
+
+}  // namespace
+
+void say(std::FILE* stream, const char* format, ...) {
+  std::va_list args;
+  va_start(args, format);
+  std::va_list copy;
+  va_copy(copy, args);
+  std::vfprintf(stream, format, args);
+  va_end(args);
+  char buffer[4096];
+  const int length = std::vsnprintf(buffer, sizeof buffer, format, copy);
+  va_end(copy);
+  if (length > 0) run_log().text.append(buffer, std::min<std::size_t>(static_cast<std::size_t>(length), sizeof buffer - 1));
+}
+
+void begin_log(const std::vector<std::string>& command_line) {
+  run_log() = RunLog{command_line, {}};
+}
+
+void write_log(const fs::path& out_dir, const char* version) {
+  std::string text = std::string("minemap ") + version + "\n";
+  for (const std::string& word : run_log().command_line) text += (text.back() == '\n' ? "" : " ") + word;
+  text += "\n\n" + run_log().text;
+  std::error_code error;
+  if (fs::is_directory(out_dir, error)) write_file_atomically(out_dir / "minemap.log", text);
+}
 
 ProgressBar::ProgressBar(bool enabled) : enabled_(enabled), terminal_(::isatty(STDERR_FILENO) != 0) {}
 
@@ -20,7 +61,7 @@ void ProgressBar::operator()(std::size_t done, std::size_t total, const std::str
   if (!terminal_) {
     // Scan 0 is the master: matching reports scans 2..n, the reduction only its end.
     if (phase == "filtering" && done != total) return;
-    std::fprintf(stderr, "minemap: progress: %s %zu/%zu\n", phase.c_str(), done, total);
+    std::fprintf(stderr, "minemap: progress: %s %zu/%zu\n", phase.c_str(), done, total);  // not logged
     std::fflush(stderr);
     return;
   }
@@ -35,7 +76,7 @@ void ProgressBar::operator()(std::size_t done, std::size_t total, const std::str
 namespace {
 
 void print_errors(const char* label, const PoseErrors& e, double unit_per_cm, const char* unit) {
-  std::printf("  %-10s mean %.3f %s (%.3f%% of %.1f %s driven), max %.3f %s, mean rotation %.3f deg\n", label,
+  say(stdout, "  %-10s mean %.3f %s (%.3f%% of %.1f %s driven), max %.3f %s, mean rotation %.3f deg\n", label,
               e.mean_translation_cm * unit_per_cm, unit,
               e.path_length_cm > 0 ? 100.0 * e.mean_translation_cm / e.path_length_cm : 0.0,
               e.path_length_cm * unit_per_cm, unit, e.max_translation_cm * unit_per_cm, unit, e.mean_rotation_deg);
@@ -46,16 +87,16 @@ void print_errors(const char* label, const PoseErrors& e, double unit_per_cm, co
 void print_truth(const MapRun& run) {
   if (!run.truth) return;
   const double unit_per_cm = 1.0 / centimetres_per(run.survey.unit);
-  std::printf("pose error against the reference poses (relative to the first scan):\n");
+  say(stdout, "pose error against the reference poses (relative to the first scan):\n");
   print_errors("odometry", run.truth->odometry, unit_per_cm, to_string(run.survey.unit));
   print_errors("registered", run.truth->registered, unit_per_cm, to_string(run.survey.unit));
 }
 
 void print_survey(const MapOptions& options, const MapRun& run) {
   const io::Survey& survey = run.survey;
-  std::printf("read %zu %s scans from %s in %.2f s (unit %s)\n", survey.scans.size(), survey.format.c_str(),
+  say(stdout, "read %zu %s scans from %s in %.2f s (unit %s)\n", survey.scans.size(), survey.format.c_str(),
               options.survey.c_str(), run.load_s, to_string(survey.unit));
-  for (const auto& warning : survey.warnings) std::fprintf(stderr, "minemap: warning: %s\n", warning.c_str());
+  for (const auto& warning : survey.warnings) say(stderr, "minemap: warning: %s\n", warning.c_str());
   // The order scans are matched in (and --initial-poses lines are paired with): natural order.
   std::string order;
   const std::size_t n = survey.scans.size();
@@ -66,12 +107,12 @@ void print_survey(const MapOptions& options, const MapRun& run) {
     }
     order += (i == 0 ? "" : ", ") + survey.scans[i].name;
   }
-  std::printf("scan order: %s\n", order.c_str());
+  say(stdout, "scan order: %s\n", order.c_str());
   if (survey.scans.size() == 1) {
-    std::printf("note: a survey of one scan: nothing to register; the map is %s at its initial pose\n",
+    say(stdout, "note: a survey of one scan: nothing to register; the map is %s at its initial pose\n",
                 survey.scans.front().name.c_str());
   }
-  std::printf("backend: %s\n", run.backend.message.c_str());
+  say(stdout, "backend: %s\n", run.backend.message.c_str());
 }
 
 void print_loops(const MapOptions& options, const MappingResult& result) {
@@ -83,7 +124,7 @@ void print_loops(const MapOptions& options, const MappingResult& result) {
     const std::string& from = result.scans[loop.from].name;
     const std::string& to = result.scans[loop.to].name;
     if (loop.closed && !options.quiet) {
-      std::printf("loop closed: %s with %s: %.1f cm / %.2f deg apart before the relaxation, %.1f cm / %.2f deg after\n",
+      say(stdout, "loop closed: %s with %s: %.1f cm / %.2f deg apart before the relaxation, %.1f cm / %.2f deg after\n",
                   to.c_str(), from.c_str(), loop.gap_before_cm, loop.gap_before_deg, loop.gap_after_cm,
                   loop.gap_after_deg);
     } else if (!loop.closed && !any_closed) {
@@ -95,18 +136,46 @@ void print_loops(const MapOptions& options, const MappingResult& result) {
   }
 }
 
+void print_summary(const MappingResult& result) {
+  std::size_t trusted = 0, retried = 0, doubtful = 0, failed = 0;
+  std::vector<std::pair<double, std::size_t>> rms;
+  for (std::size_t i = 1; i < result.scans.size(); ++i) {  // scan 0 is the master: never matched
+    const ScanOutcome& s = result.scans[i];
+    if (!s.registered) {
+      ++failed;
+      continue;
+    }
+    if (s.health.doubtful()) ++doubtful;
+    else ++trusted;
+    if (s.health.retry_bound_cm > 0.0f) ++retried;
+    rms.emplace_back(s.last_match.rms_cm, i);
+  }
+  say(stdout, "summary: %zu scans: %zu trusted (%zu after a retry at a wider bound), %zu doubtful, %zu not registered",
+      result.scans.size(), trusted, retried, doubtful, failed);
+  if (!rms.empty()) {
+    std::sort(rms.begin(), rms.end());
+    const auto& worst = rms.back();
+    say(stdout, "; rms median %.2f cm, worst %.2f cm (%s)", rms[rms.size() / 2].first, worst.first,
+        result.scans[worst.second].name.c_str());
+  }
+  std::size_t closed = 0;
+  for (const LoopClosure& loop : result.loops) closed += loop.closed ? 1 : 0;
+  if (!result.loops.empty()) say(stdout, "; loops: %zu of %zu candidates closed", closed, result.loops.size());
+  say(stdout, "\n");
+}
+
 Verdict judge_run(const MappingResult& result, const std::vector<std::string>& sources) {
   Verdict verdict;
   for (std::size_t i = 0; i < result.scans.size(); ++i) {
     const ScanOutcome& s = result.scans[i];
     if (s.registered) continue;
     verdict.all_registered = false;
-    std::fprintf(stderr, "minemap: %s: scan %s not registered: %s\n", sources[i].c_str(), s.name.c_str(),
+    say(stderr, "minemap: %s: scan %s not registered: %s\n", sources[i].c_str(), s.name.c_str(),
                  s.failure.c_str());
   }
   verdict.doubtful = result.doubtful();
   for (const std::size_t i : verdict.doubtful) {
-    std::fprintf(stderr, "minemap: %s: scan %s registered, but doubtful: %s\n", sources[i].c_str(),
+    say(stderr, "minemap: %s: scan %s registered, but doubtful: %s\n", sources[i].c_str(),
                  result.scans[i].name.c_str(), result.scans[i].health.doubt.c_str());
   }
   return verdict;

@@ -4,12 +4,22 @@
 // both follow (a scan not registered: 4; a doubtful match: 13 unless --accept-doubtful).
 //
 // Thread-safety: the thread running the command.
+#include <cstdio>
 #include <string>
 #include <vector>
 
 #include "minemap/cli/cli.hpp"
 
 namespace minemap::cli {
+
+/// Prints like std::fprintf to `stream` (stdout: what happened; stderr: what went wrong) and keeps
+/// the text for OUT/minemap.log. Thread-safety: the thread running the command.
+void say(std::FILE* stream, const char* format, ...) __attribute__((format(printf, 2, 3)));
+/// Starts the log of a command (its words, program first).
+void begin_log(const std::vector<std::string>& command_line);
+/// Writes OUT/minemap.log (atomically, where OUT exists): the version, the command line and what
+/// the command printed so far but its progress lines.
+void write_log(const fs::path& out_dir, const char* version);
 
 /// Progress on stderr: a one-line bar on a terminal; otherwise (a log file, a batch job) a plain
 /// line per matched scan, and one when the reduction is done.
@@ -33,6 +43,9 @@ void print_survey(const MapOptions& options, const MapRun& run);
 void print_truth(const MapRun& run);
 /// Each loop candidate, closed or not (an unclosed one only when no loop closed).
 void print_loops(const MapOptions& options, const MappingResult& result);
+/// What the matches came to, in one paragraph: scans trusted, retried, doubtful and not registered,
+/// the median and worst rms, the loops closed (print_loops gives their gaps).
+void print_summary(const MappingResult& result);
 
 /// What the matches came to: the scans not registered and the doubtful ones, each named on stderr
 /// with its file (`sources`, one per scan).

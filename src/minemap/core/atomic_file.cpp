@@ -26,7 +26,7 @@ bool fsync_path(const std::filesystem::path& path) {
   return ok;
 }
 
-void commit(const std::filesystem::path& tmp, const std::filesystem::path& path) {
+void commit_temp(const std::filesystem::path& tmp, const std::filesystem::path& path) {
   std::error_code ec;
   if (!fsync_path(tmp)) {
     std::filesystem::remove(tmp, ec);
@@ -63,13 +63,36 @@ void write_file_atomically(const std::filesystem::path& path, const std::functio
       throw;
     }
   }
-  commit(tmp, path);
+  commit_temp(tmp, path);
 }
 
 void write_bytes_atomically(const std::filesystem::path& path, std::span<const std::uint8_t> bytes) {
   write_file_atomically(path, [&](std::ostream& out) {
     out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
   });
+}
+
+AtomicOutputFile::AtomicOutputFile(std::filesystem::path path) : path_(std::move(path)), tmp_(temp_path_for(path_)) {
+  out_ = std::make_unique<std::ofstream>(tmp_, std::ios::binary | std::ios::trunc);
+  if (!*out_) throw OutputError("cannot write " + path_.string() + ": " + std::strerror(errno));
+}
+
+AtomicOutputFile::~AtomicOutputFile() {
+  if (committed_) return;
+  out_.reset();
+  std::error_code ec;
+  std::filesystem::remove(tmp_, ec);
+}
+
+std::ostream& AtomicOutputFile::stream() { return *out_; }
+
+void AtomicOutputFile::commit() {
+  out_->flush();
+  const bool written = static_cast<bool>(*out_);
+  out_->close();
+  if (!written) throw OutputError("cannot write " + path_.string() + ": write failed (disk full?)");
+  commit_temp(tmp_, path_);  // removes the temp file itself when it fails
+  committed_ = true;
 }
 
 void remove_stale_temp_files(const std::filesystem::path& dir, bool all_pids) {

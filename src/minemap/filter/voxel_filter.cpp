@@ -58,29 +58,69 @@ class CellIndex {
   int shift_ = 0;
 };
 
-}  // namespace
+/// The cell of a point: floor of each coordinate times `inverse` (1 / cell size).
+template <typename Point>
+Cell cell_of_point(const Point& p, double inverse) {
+  return {static_cast<std::int64_t>(std::floor(static_cast<double>(p.x()) * inverse)),
+          static_cast<std::int64_t>(std::floor(static_cast<double>(p.y()) * inverse)),
+          static_cast<std::int64_t>(std::floor(static_cast<double>(p.z()) * inverse))};
+}
 
-std::vector<Eigen::Vector3f> voxel_mean_filter(std::span<const Eigen::Vector3f> points_cm, float voxel_cm) {
+/// The voxel means of `points_cm`, and of `values` when given.
+std::vector<Eigen::Vector3f> voxel_means(std::span<const Eigen::Vector3f> points_cm, float voxel_cm,
+                                         std::span<const float> values, std::vector<float>* value_means) {
   if (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm)) throw std::invalid_argument("voxel size must be a finite length > 0 cm");
+  if (value_means != nullptr && values.size() != points_cm.size()) {
+    throw std::invalid_argument("voxel_mean_filter: one value per point expected");
+  }
   CellIndex cell_of(points_cm.size() / 4);
   std::vector<Eigen::Vector3d> sums;
+  std::vector<double> value_sums;
   std::vector<std::uint32_t> counts;
   const double inverse = 1.0 / static_cast<double>(voxel_cm);
-  for (const Eigen::Vector3f& p : points_cm) {
-    const Cell cell{static_cast<std::int64_t>(std::floor(static_cast<double>(p.x()) * inverse)),
-                    static_cast<std::int64_t>(std::floor(static_cast<double>(p.y()) * inverse)),
-                    static_cast<std::int64_t>(std::floor(static_cast<double>(p.z()) * inverse))};
-    const auto [index, fresh] = cell_of.find_or_add(cell);
+  for (std::size_t k = 0; k < points_cm.size(); ++k) {
+    const Eigen::Vector3f& p = points_cm[k];
+    const auto [index, fresh] = cell_of.find_or_add(cell_of_point(p, inverse));
     if (fresh) {
       sums.push_back(Eigen::Vector3d::Zero());
       counts.push_back(0);
+      if (value_means != nullptr) value_sums.push_back(0.0);
     }
     sums[index] += p.cast<double>();
     ++counts[index];
+    if (value_means != nullptr) value_sums[index] += static_cast<double>(values[k]);
   }
   std::vector<Eigen::Vector3f> out(sums.size());
   for (std::size_t i = 0; i < sums.size(); ++i) out[i] = (sums[i] / static_cast<double>(counts[i])).cast<float>();
+  if (value_means != nullptr) {
+    value_means->resize(sums.size());
+    for (std::size_t i = 0; i < sums.size(); ++i) {
+      (*value_means)[i] = static_cast<float>(value_sums[i] / static_cast<double>(counts[i]));
+    }
+  }
   return out;
+}
+
+}  // namespace
+
+std::vector<Eigen::Vector3f> voxel_mean_filter(std::span<const Eigen::Vector3f> points_cm, float voxel_cm) {
+  return voxel_means(points_cm, voxel_cm, {}, nullptr);
+}
+
+std::vector<Eigen::Vector3f> voxel_mean_filter(std::span<const Eigen::Vector3f> points_cm, float voxel_cm,
+                                               std::span<const float> values, std::vector<float>& value_means) {
+  return voxel_means(points_cm, voxel_cm, values, &value_means);
+}
+
+std::vector<std::size_t> voxel_first_points(std::span<const Eigen::Vector3d> points, double voxel) {
+  if (!(voxel > 0.0) || !std::isfinite(voxel)) throw std::invalid_argument("voxel size must be a finite length > 0");
+  CellIndex cell_of(points.size() / 4);
+  std::vector<std::size_t> kept;
+  const double inverse = 1.0 / voxel;
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    if (cell_of.find_or_add(cell_of_point(points[k], inverse)).second) kept.push_back(k);
+  }
+  return kept;
 }
 
 }  // namespace minemap

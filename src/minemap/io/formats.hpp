@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
@@ -54,6 +55,9 @@ struct ReadSettings {
   std::uint64_t max_points = 50'000'000;
   /// When set, point readers add what they dropped (NaN points) to it.
   ReadReport* report = nullptr;
+  /// The point attributes to keep where the file has them (PointAttribute bits; Scan::attributes).
+  /// Mapping keeps the intensity alone (the 3D view colours by it); exports keep every one.
+  std::uint8_t attributes = kAllPointAttributes;
 };
 
 // ---- 3DTK uos: scanNNN.3d, scanNNN.pose, scanNNN.frames --------------------------------------
@@ -91,6 +95,41 @@ Scan read_ply(const fs::path& path, const ReadSettings& settings = {});
 /// Writes world-frame points given in cm (e.g. a merged map) as PLY in `unit`.
 void write_ply(const fs::path& path, std::span<const Eigen::Vector3f> points_cm, bool binary = true,
                LengthUnit unit = LengthUnit::kMetre);
+
+/// A PLY cloud written batch by batch (binary little-endian), for clouds too large to hold at once:
+/// the vertex count is set when it is finished, and the file appears under its name only then
+/// (core/atomic_file.hpp: a writer destroyed unfinished leaves nothing). Vertex properties: x y z
+/// (float, or double: coordinates far from the origin keep their millimetres), then the attributes
+/// of `Layout::attributes` (intensity float, red green blue uchar, time double, ring ushort,
+/// return_number uchar), then `scan` (uint) when `scan_index`. Thread-safety: one thread.
+class PlyStreamWriter {
+ public:
+  struct Layout {
+    bool double_coordinates = false;
+    std::uint8_t attributes = 0;        ///< PointAttribute bits
+    bool scan_index = false;
+    std::vector<std::string> comments;  ///< one header comment line each (frame, unit, origin)
+  };
+  PlyStreamWriter(const fs::path& path, Layout layout);
+  ~PlyStreamWriter();
+  PlyStreamWriter(const PlyStreamWriter&) = delete;
+  PlyStreamWriter& operator=(const PlyStreamWriter&) = delete;
+
+  /// Appends `points` (in the file's frame and unit) with their attributes (the layout's columns;
+  /// a column `attributes` lacks is written as 0) and scan index.
+  void write(std::span<const Eigen::Vector3d> points, const PointAttributes& attributes, std::uint32_t scan = 0);
+  std::uint64_t count() const { return count_; }
+  /// Sets the vertex count and moves the file under its name.
+  void finish();
+
+ private:
+  struct File;
+  std::unique_ptr<File> file_;
+  Layout layout_;
+  std::uint64_t count_ = 0;
+  std::uint64_t count_offset_ = 0;  ///< where the header's vertex count stands
+  std::string buffer_;
+};
 
 // ---- KITTI velodyne .bin (float32 x y z [intensity]) ---------------------------------------------
 
@@ -147,6 +186,9 @@ struct SurveyReadSettings {
   /// range's end. Not for LAS/LAZ and E57 surveys.
   std::size_t first_scan = 0;
   std::size_t max_scans = std::numeric_limits<std::size_t>::max();
+  /// The survey's local origin (Survey::origin_cm) when already known: a survey read in parts (a
+  /// range, as `minemap watch` reads it) keeps the origin its first part chose.
+  std::optional<Eigen::Vector3d> origin_cm;
 };
 
 /// A survey loaded from a folder.
@@ -156,8 +198,12 @@ struct Survey {
   std::vector<Scan> scans;                    ///< in natural order of names (full2 before full10); pose_cm = initial guess
   std::optional<std::vector<Pose>> truth_cm;  ///< reference T_world_file per scan, where present
   /// The survey's local frame in the files' frame (cm): file coordinates = world + origin_cm. Zero,
-  /// but for georeferenced surveys (LAS/LAZ, E57), whose UTM coordinates floats cannot hold to the
-  /// millimetre; outputs are in the local frame and report.json says the origin.
+  /// but for surveys in world coordinates (UTM and the like: the first scan stands more than
+  /// kWorldCoordinates_cm from the files' origin; LAS/LAZ and E57 choose their own): the files'
+  /// frame and the world are then both moved by -origin_cm, in whole metres (each scan's local
+  /// origin, and its poses, truth, initial and reference poses conjugated), so matching, poses and
+  /// views stay near zero; outputs are in the local frame, report.json states the origin, and
+  /// exports add it back in double.
   Eigen::Vector3d origin_cm = Eigen::Vector3d::Zero();
   /// Warnings for the user, one line each: NaN points dropped, gaps in the numbering.
   std::vector<std::string> warnings;
@@ -166,6 +212,10 @@ struct Survey {
   /// The outputs a person opens follow it (views, map.laz).
   bool frame_3dtk = false;
 };
+
+/// A survey whose first scan stands farther than this from its files' origin is in world
+/// coordinates (Survey::origin_cm): 1 km.
+inline constexpr double kWorldCoordinates_cm = 100000.0;
 
 /// The fewest points a survey's scan may have (Horn's closed form needs three points).
 inline constexpr std::size_t kMinScanPoints = 3;
@@ -185,6 +235,11 @@ inline constexpr std::size_t kUnitCheckMinPoints = 100;
 /// same number or the same points (kInconsistentSurvey), the units check (kSuspiciousUnits). Gaps in
 /// the numbering and dropped NaN points are Survey::warnings.
 Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings = {});
+
+/// Reads one scan file of a survey of `format` ("uos": a .3d, "pcd", "ply", "kitti": a .bin, or a
+/// NNNNNN/points.bin of x y z only) as read_survey reads it: points, slices and attributes, named as
+/// read_survey names it; its pose is not read (an export takes it from report.json).
+Scan read_scan_file(const fs::path& path, const std::string& format, const ReadSettings& settings = {});
 
 /// The names of a survey folder's complete scans, from the first in natural order (Scan::name, as
 /// read_survey names them): uos, a `scanNNN.3d` is complete once its `scanNNN.pose` exists (a

@@ -1,6 +1,6 @@
 // KITTI Velodyne .bin: raw little-endian float32 records, x y z intensity (4 floats, KITTI's own
 // files) or x y z (3 floats, e.g. gtsam_points' kitti_07_dump points.bin). No header, so the file size
-// alone says how many points there are; intensity is ignored.
+// alone says how many points there are; the 4th float is kept as the intensity (Scan::attributes).
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -74,6 +74,7 @@ Scan read_kitti_bin(const fs::path& path, const ReadSettings& settings, int floa
                          InputProblem::kCountBeyondLimits);
   }
   detail::ScanBuilder builder(path, settings, LengthUnit::kMetre);
+  if (floats_per_point == 4) builder.carries(kIntensity);  // KITTI's 4th float, the reflectance
   builder.reserve(static_cast<std::size_t>(whole_records));
   for (std::uint64_t i = 0; i < whole_records; ++i) {
     const std::uint64_t offset = i * record_bytes;
@@ -89,7 +90,9 @@ Scan read_kitti_bin(const fs::path& path, const ReadSettings& settings, int floa
                              InputProblem::kNonFinite);
       }
     }
-    const auto added = builder.add(x, y, z);
+    PointValues values;
+    if (floats_per_point == 4) values.intensity = detail::load_le<float>(record + 12);
+    const auto added = builder.add(x, y, z, values);
     if (added != detail::ScanBuilder::AddResult::kOk) {
       detail::fail_at_byte(name, offset, "point " + std::to_string(i) + ": " + builder.describe(added),
                            builder.problem_of(added));
@@ -107,7 +110,9 @@ void write_kitti_bin(const fs::path& path, const Scan& scan, int floats_per_poin
   for (std::size_t i = 0; i < scan.size(); ++i) {
     const Eigen::Vector3d p = scan.file_point(i) / divisor;
     for (int axis = 0; axis < 3; ++axis) detail::append_le(out, static_cast<float>(p[axis]));
-    if (floats_per_point == 4) detail::append_le(out, 0.0f);  // minemap keeps no intensity
+    if (floats_per_point == 4) {
+      detail::append_le(out, scan.attributes.intensity.empty() ? 0.0f : scan.attributes.intensity[i]);
+    }
   }
   write_file_atomically(path, out);
 }

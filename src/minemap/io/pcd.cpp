@@ -5,7 +5,10 @@
 // in turn).
 //
 // Choices, documented here because PCL leaves them open:
-//  - x, y and z must be F4 or F8 with COUNT 1; every other field (any type, size, count) is skipped.
+//  - x, y and z must be F4 or F8 with COUNT 1. The attributes minemap keeps (Scan::attributes),
+//    each a field of COUNT 1: intensity (or i), rgb (or rgba: PCL packs 0xRRGGBB into a float's bits,
+//    F4, or a U4), time (or t, timestamp; seconds) and ring. Every other field (any type, size,
+//    count) is skipped.
 //  - NaN points are dropped and counted (ReadReport). PCL marks "no return" with NaN x/y/z in
 //    organized clouds (HEIGHT > 1), and a PCD file has no is_dense flag, so any PCD may hold them
 //    legitimately (pcl::removeNaNFromPointCloud drops a point when x, y or z is NaN; so do we). An
@@ -18,6 +21,8 @@
 
 #include <array>
 #include <cmath>
+#include <cstring>
+#include <initializer_list>
 #include <limits>
 #include <string>
 #include <vector>
@@ -60,6 +65,13 @@ struct PcdHeader {
   std::uint64_t point_bytes = 0;
   std::uint64_t values_per_point = 0;
   std::array<int, 3> xyz_fields{};  ///< indices into fields
+  /// The attribute fields (indices into fields, -1: absent), by PointAttribute: intensity, colour,
+  /// time, ring.
+  int intensity_field = -1, rgb_field = -1, time_field = -1, ring_field = -1;
+  std::uint8_t attributes() const {
+    return static_cast<std::uint8_t>((intensity_field >= 0 ? kIntensity : 0) | (rgb_field >= 0 ? kColour : 0) |
+                                     (time_field >= 0 ? kTime : 0) | (ring_field >= 0 ? kRing : 0));
+  }
   std::size_t data_offset = 0;      ///< first byte after the DATA line
 };
 
@@ -190,6 +202,16 @@ PcdHeader read_header(LineReader& reader, const ReadSettings& settings, double s
         }
       }
     }
+    // An attribute minemap keeps: the first field of its names, with COUNT 1.
+    const auto claim = [&](int& slot, std::initializer_list<const char*> aliases) {
+      for (const char* alias : aliases) {
+        if (field.name == alias && slot < 0 && field.count == 1) slot = static_cast<int>(i);
+      }
+    };
+    claim(header.intensity_field, {"intensity", "i"});
+    if (field.size == 4) claim(header.rgb_field, {"rgb", "rgba"});
+    claim(header.time_field, {"time", "t", "timestamp"});
+    claim(header.ring_field, {"ring"});
     header.fields.push_back(std::move(field));
   }
   for (int axis = 0; axis < 3; ++axis) {
@@ -220,10 +242,46 @@ PcdHeader read_header(LineReader& reader, const ReadSettings& settings, double s
   return header;
 }
 
+/// One binary value of `field` as a double (any TYPE and SIZE).
+double load_value(const char* bytes, const PcdField& field) {
+  switch (field.type) {
+    case 'F': return field.size == 8 ? detail::load_le<double>(bytes) : detail::load_le<float>(bytes);
+    case 'U':
+      switch (field.size) {
+        case 1: return static_cast<double>(static_cast<unsigned char>(bytes[0]));
+        case 2: return detail::load_le<std::uint16_t>(bytes);
+        case 4: return detail::load_le<std::uint32_t>(bytes);
+        default: return static_cast<double>(detail::load_le<std::uint64_t>(bytes));
+      }
+    default:
+      switch (field.size) {
+        case 1: return static_cast<double>(static_cast<signed char>(bytes[0]));
+        case 2: return detail::load_le<std::int16_t>(bytes);
+        case 4: return detail::load_le<std::int32_t>(bytes);
+        default: return static_cast<double>(detail::load_le<std::int64_t>(bytes));
+      }
+  }
+}
+
+/// A packed colour 0xRRGGBB: PCL's F4 rgb holds the bits in a float; a U4 holds them as they are.
+std::uint32_t packed_rgb(std::uint32_t bits) { return bits & 0xFFFFFFu; }
+
+/// The attribute values of one point, `value_of(field index)` reading a field's value as a double
+/// and `bits_of(field index)` its 4 bytes.
+template <class ValueOf, class BitsOf>
+PointValues attribute_values(const PcdHeader& header, std::uint8_t columns, ValueOf&& value_of, BitsOf&& bits_of) {
+  PointValues values;
+  if (columns & kIntensity) values.intensity = static_cast<float>(value_of(header.intensity_field));
+  if (columns & kColour) values.rgb = packed_rgb(bits_of(header.rgb_field));
+  if (columns & kTime) values.time_s = value_of(header.time_field);
+  if (columns & kRing) values.ring = static_cast<std::uint16_t>(value_of(header.ring_field));
+  return values;
+}
+
 /// Adds one point read from the data; the builder drops (and counts) a NaN "no return" point.
 /// `fail(axis, message, problem)` is called to throw at the right line or byte.
 template <class Fail>
-void add_point(detail::ScanBuilder& builder, const std::array<double, 3>& xyz, Fail&& fail) {
+void add_point(detail::ScanBuilder& builder, const std::array<double, 3>& xyz, const PointValues& values, Fail&& fail) {
   if (!(std::isnan(xyz[0]) || std::isnan(xyz[1]) || std::isnan(xyz[2]))) {
     for (int axis = 0; axis < 3; ++axis) {
       if (!std::isfinite(xyz[static_cast<std::size_t>(axis)])) {
@@ -231,7 +289,7 @@ void add_point(detail::ScanBuilder& builder, const std::array<double, 3>& xyz, F
       }
     }
   }
-  const auto added = builder.add(xyz[0], xyz[1], xyz[2]);
+  const auto added = builder.add(xyz[0], xyz[1], xyz[2], values);
   if (added != detail::ScanBuilder::AddResult::kOk) fail(0, builder.describe(added), builder.problem_of(added));
 }
 
@@ -270,7 +328,27 @@ void read_ascii_data(LineReader& reader, const PcdHeader& header, detail::ScanBu
         reader.fail(problem);
       }
     }
-    add_point(builder, xyz, [&](int, const std::string& message, InputProblem problem) { reader.fail(message, problem); });
+    // Attribute values that do not parse are a malformed line, as coordinates are.
+    const auto token_of = [&](int field) { return tokens[header.fields[static_cast<std::size_t>(field)].first_value]; };
+    const auto value_of = [&](int field) {
+      double value = 0.0;
+      if (detail::parse_double(token_of(field), value) != detail::NumberStatus::kOk) {
+        reader.fail(header.fields[static_cast<std::size_t>(field)].name + " value " + detail::quoted(token_of(field)) +
+                    " is not a number");
+      }
+      return value;
+    };
+    const auto bits_of = [&](int field) -> std::uint32_t {
+      const double value = value_of(field);
+      if (header.fields[static_cast<std::size_t>(field)].type != 'F') return static_cast<std::uint32_t>(value);
+      const float packed = static_cast<float>(value);  // PCL writes the float that holds the bits
+      std::uint32_t bits = 0;
+      std::memcpy(&bits, &packed, 4);
+      return bits;
+    };
+    const PointValues values = attribute_values(header, builder.columns(), value_of, bits_of);
+    add_point(builder, xyz, values,
+              [&](int, const std::string& message, InputProblem problem) { reader.fail(message, problem); });
   }
   if (lines_read < header.points) {
     reader.fail("only " + std::to_string(lines_read) + " of POINTS " + std::to_string(header.points) +
@@ -287,6 +365,7 @@ template <class FieldBase, class FieldStride, class ByteOf>
 void read_binary_points(const char* data, const PcdHeader& header, detail::ScanBuilder& builder, const std::string& path,
                         FieldBase&& field_base, FieldStride&& field_stride, ByteOf&& byte_of) {
   builder.reserve(static_cast<std::size_t>(header.points));
+  const std::uint8_t columns = builder.columns();
   std::array<std::uint64_t, 3> base{}, stride{};
   std::array<bool, 3> is_double{};
   for (std::size_t axis = 0; axis < 3; ++axis) {
@@ -301,7 +380,14 @@ void read_binary_points(const char* data, const PcdHeader& header, detail::ScanB
       const char* value = data + base[axis] + i * stride[axis];
       xyz[axis] = is_double[axis] ? detail::load_le<double>(value) : detail::load_le<float>(value);
     }
-    add_point(builder, xyz, [&](int axis, const std::string& message, InputProblem problem) {
+    const auto at = [&](int field) {
+      const PcdField& f = header.fields[static_cast<std::size_t>(field)];
+      return data + field_base(f) + i * field_stride(f);
+    };
+    const PointValues values = attribute_values(
+        header, columns, [&](int field) { return load_value(at(field), header.fields[static_cast<std::size_t>(field)]); },
+        [&](int field) { return detail::load_le<std::uint32_t>(at(field)); });
+    add_point(builder, xyz, values, [&](int axis, const std::string& message, InputProblem problem) {
       const std::uint64_t offset = base[static_cast<std::size_t>(axis)] + i * stride[static_cast<std::size_t>(axis)];
       detail::fail_at_byte(path, byte_of(offset), "point " + std::to_string(i) + ": " + message, problem);
     });
@@ -317,6 +403,7 @@ Scan read_pcd(const fs::path& path, const ReadSettings& settings) {
   LineReader reader(bytes, name);
   detail::ScanBuilder builder(path, settings, LengthUnit::kMetre);
   const PcdHeader header = read_header(reader, settings, centimetres_per(builder.unit()));
+  builder.carries(header.attributes());
 
   const std::uint64_t remaining = bytes.size() - header.data_offset;
   const char* data = bytes.data() + header.data_offset;
@@ -397,8 +484,29 @@ void write_pcd(const fs::path& path, const Scan& scan, PcdEncoding encoding, Len
 
   Eigen::Quaterniond q(Eigen::Matrix3d(scan.pose_cm.block<3, 3>(0, 0)));
   q.normalize();
-  std::string out = "# .PCD v0.7 - Point Cloud Data file format (minemap)\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\n"
-                    "TYPE F F F\nCOUNT 1 1 1\nWIDTH " + std::to_string(n) + "\nHEIGHT 1\nVIEWPOINT";
+  // The attributes the scan carries, after x y z: intensity F4, rgb F4 (PCL's packed colour), time
+  // F8, ring U2 (return numbers have no PCL field and are not written).
+  const PointAttributes& attributes = scan.attributes;
+  const std::uint8_t columns = attributes.columns() & static_cast<std::uint8_t>(kIntensity | kColour | kTime | kRing);
+  std::string fields = "x y z", sizes = "4 4 4", types = "F F F", counts = "1 1 1";
+  const auto field = [&](const char* name, const char* size, const char* type) {
+    fields += std::string(" ") + name;
+    sizes += std::string(" ") + size;
+    types += std::string(" ") + type;
+    counts += " 1";
+  };
+  if (columns & kIntensity) field("intensity", "4", "F");
+  if (columns & kColour) field("rgb", "4", "F");
+  if (columns & kTime) field("time", "8", "F");
+  if (columns & kRing) field("ring", "2", "U");
+  std::string out = "# .PCD v0.7 - Point Cloud Data file format (minemap)\nVERSION 0.7\nFIELDS " + fields +
+                    "\nSIZE " + sizes + "\nTYPE " + types + "\nCOUNT " + counts + "\nWIDTH " + std::to_string(n) +
+                    "\nHEIGHT 1\nVIEWPOINT";
+  const auto rgb_float = [&](std::size_t i) {
+    float packed = 0.0f;
+    std::memcpy(&packed, &attributes.rgb[i], 4);
+    return packed;
+  };
   for (const double v : {scan.pose_cm(0, 3) / divisor, scan.pose_cm(1, 3) / divisor, scan.pose_cm(2, 3) / divisor, q.w(),
                          q.x(), q.y(), q.z()}) {
     out += ' ';
@@ -413,6 +521,14 @@ void write_pcd(const fs::path& path, const Scan& scan, PcdEncoding encoding, Len
           if (axis > 0) out += ' ';
           detail::append_number(out, value(i, axis));
         }
+        const auto append = [&](auto v) {
+          out += ' ';
+          detail::append_number(out, v);
+        };
+        if (columns & kIntensity) append(attributes.intensity[i]);
+        if (columns & kColour) append(rgb_float(i));
+        if (columns & kTime) append(attributes.time_s[i]);
+        if (columns & kRing) out += ' ' + std::to_string(attributes.ring[i]);
         out += '\n';
       }
       break;
@@ -421,6 +537,10 @@ void write_pcd(const fs::path& path, const Scan& scan, PcdEncoding encoding, Len
       out.reserve(out.size() + n * 12);
       for (std::size_t i = 0; i < n; ++i) {
         for (int axis = 0; axis < 3; ++axis) detail::append_le(out, value(i, axis));
+        if (columns & kIntensity) detail::append_le(out, attributes.intensity[i]);
+        if (columns & kColour) detail::append_le(out, attributes.rgb[i]);
+        if (columns & kTime) detail::append_le(out, attributes.time_s[i]);
+        if (columns & kRing) detail::append_le(out, attributes.ring[i]);
       }
       break;
     case PcdEncoding::kBinaryCompressed: {
@@ -430,6 +550,13 @@ void write_pcd(const fs::path& path, const Scan& scan, PcdEncoding encoding, Len
       for (int axis = 0; axis < 3; ++axis) {
         for (std::size_t i = 0; i < n; ++i) detail::append_le(soa, value(i, axis));
       }
+      const auto column = [&](const auto& values) {
+        for (const auto v : values) detail::append_le(soa, v);
+      };
+      if (columns & kIntensity) column(attributes.intensity);
+      if (columns & kColour) column(attributes.rgb);
+      if (columns & kTime) column(attributes.time_s);
+      if (columns & kRing) column(attributes.ring);
       if (soa.size() > std::numeric_limits<std::uint32_t>::max() / 2) {
         throw OutputError("cannot write " + path.string() + ": too many points for one LZF block");
       }

@@ -3,7 +3,10 @@
 //
 // Choices:
 //  - Only the "vertex" element is read; x, y and z may be any scalar type (float and double in
-//    practice, int in some exports), other vertex properties are skipped, lists included.
+//    practice, int in some exports). The attributes minemap keeps (Scan::attributes), any scalar
+//    type: intensity (or scalar_intensity, scalar_Intensity, reflectance), colour (red, green and
+//    blue together; integers up to 255, or 16-bit ones scaled down), time (or timestamp, gps_time,
+//    scalar_GpsTime; seconds) and ring. Other vertex properties are skipped, lists included.
 //  - Elements declared before "vertex" (rare, e.g. faces first) are walked and skipped, lists
 //    properly; elements after it are not read at all.
 //  - ascii: one element instance per line (what every writer produces), so a wrong value count is
@@ -12,8 +15,10 @@
 //  - A vertex with a NaN coordinate is dropped and counted, as in every point reader (formats.hpp;
 //    PLY has no "no return" convention, but exporters write NaN for missing points); an infinite
 //    one is an InputError.
+#include <algorithm>
 #include <array>
 #include <cmath>
+#include <initializer_list>
 #include <limits>
 #include <string>
 #include <vector>
@@ -124,12 +129,77 @@ struct PlyElement {
 
 enum class PlyEncoding { kAscii, kBinaryLittleEndian };
 
+/// The vertex properties that hold the attributes minemap keeps (indices, kNone: absent).
+struct PlyAttributeProperties {
+  static constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
+  std::size_t intensity = kNone, time = kNone, ring = kNone;
+  std::array<std::size_t, 3> rgb{kNone, kNone, kNone};
+  bool colour_is_16_bit = false;
+  std::uint8_t columns() const {
+    const bool colour = rgb[0] != kNone && rgb[1] != kNone && rgb[2] != kNone;
+    return static_cast<std::uint8_t>((intensity != kNone ? kIntensity : 0) | (colour ? kColour : 0) |
+                                     (time != kNone ? kTime : 0) | (ring != kNone ? kRing : 0));
+  }
+};
+
 struct PlyHeader {
   PlyEncoding encoding = PlyEncoding::kAscii;
   std::vector<PlyElement> elements;
   std::size_t vertex_element = 0;
   std::array<std::size_t, 3> xyz_properties{};  ///< indices into the vertex element's properties
+  PlyAttributeProperties attributes;
   std::size_t data_offset = 0;
+};
+
+/// Finds the attribute properties among the vertex element's scalar properties.
+PlyAttributeProperties attribute_properties(const PlyElement& vertex) {
+  PlyAttributeProperties found;
+  using Names = std::initializer_list<std::string_view>;
+  const auto claim = [&](std::size_t& slot, std::size_t p, Names names) {
+    for (const std::string_view name : names) {
+      if (vertex.properties[p].name == name && slot == PlyAttributeProperties::kNone) slot = p;
+    }
+  };
+  for (std::size_t p = 0; p < vertex.properties.size(); ++p) {
+    if (vertex.properties[p].is_list) continue;
+    claim(found.intensity, p, Names{"intensity", "scalar_intensity", "scalar_Intensity", "reflectance"});
+    claim(found.time, p, Names{"time", "timestamp", "gps_time", "scalar_GpsTime"});
+    claim(found.ring, p, Names{"ring"});
+    claim(found.rgb[0], p, Names{"red"});
+    claim(found.rgb[1], p, Names{"green"});
+    claim(found.rgb[2], p, Names{"blue"});
+  }
+  for (const std::size_t channel : found.rgb) {
+    if (channel != PlyAttributeProperties::kNone && size_of(vertex.properties[channel].type) == 2) {
+      found.colour_is_16_bit = true;
+    }
+  }
+  return found;
+}
+
+/// Collects one vertex's attribute values, property by property.
+struct AttributeCollector {
+  const PlyAttributeProperties& where;
+  PointValues values;
+  std::array<double, 3> channel{};
+
+  void take(std::size_t p, double value) {
+    if (p == where.intensity) values.intensity = static_cast<float>(value);
+    if (p == where.time) values.time_s = value;
+    if (p == where.ring) values.ring = static_cast<std::uint16_t>(value);
+    for (std::size_t c = 0; c < 3; ++c) {
+      if (p == where.rgb[c]) channel[c] = value;
+    }
+  }
+  const PointValues& finish() {
+    std::uint32_t packed = 0;
+    for (std::size_t c = 0; c < 3; ++c) {
+      const double v = where.colour_is_16_bit ? channel[c] / 257.0 : channel[c];
+      packed = (packed << 8) | static_cast<std::uint32_t>(std::clamp(std::lround(v), 0L, 255L));
+    }
+    values.rgb = packed;
+    return values;
+  }
 };
 
 PlyHeader read_header(LineReader& reader, const ReadSettings& settings) {
@@ -213,6 +283,7 @@ PlyHeader read_header(LineReader& reader, const ReadSettings& settings) {
     }
     if (!found) detail::fail_at_line(reader.path(), vertex.line, "vertex element has no property " + axis_name);
   }
+  header.attributes = attribute_properties(vertex);
   if (vertex.count == 0) {
     detail::fail_at_line(reader.path(), vertex.line, "no points (element vertex 0)", InputProblem::kEmpty);
   }
@@ -303,6 +374,8 @@ void read_binary_vertices(BinaryCursor& cursor, const PlyHeader& header, detail:
   for (std::uint64_t i = 0; i < vertex.count; ++i) {
     std::array<double, 3> xyz{};
     std::array<std::uint64_t, 3> offsets{};
+    AttributeCollector attributes{header.attributes};
+    const bool collect = builder.columns() != 0;
     walk_binary_instance(cursor, vertex, [&](std::size_t p, const char* bytes) {
       for (std::size_t axis = 0; axis < 3; ++axis) {
         if (header.xyz_properties[axis] == p) {
@@ -310,6 +383,7 @@ void read_binary_vertices(BinaryCursor& cursor, const PlyHeader& header, detail:
           offsets[axis] = cursor.position() - size_of(vertex.properties[p].type);
         }
       }
+      if (collect) attributes.take(p, load_scalar(bytes, vertex.properties[p].type));
     });
     for (std::size_t axis = 0; axis < 3; ++axis) {
       if (std::isinf(xyz[axis])) {  // NaN drops the vertex (ScanBuilder)
@@ -317,7 +391,7 @@ void read_binary_vertices(BinaryCursor& cursor, const PlyHeader& header, detail:
                     InputProblem::kNonFinite);
       }
     }
-    const auto added = builder.add(xyz[0], xyz[1], xyz[2]);
+    const auto added = builder.add(xyz[0], xyz[1], xyz[2], collect ? attributes.finish() : PointValues{});
     if (added != detail::ScanBuilder::AddResult::kOk) {
       cursor.fail(offsets[0], "vertex " + std::to_string(i) + ": " + builder.describe(added), builder.problem_of(added));
     }
@@ -405,7 +479,25 @@ void read_ascii_data(LineReader& reader, const PlyHeader& header, detail::ScanBu
       if (token_index + 1 == tokens.size()) reader.fail_short_line(problem);
       reader.fail(problem);
     }
-    const auto added = builder.add(xyz[0], xyz[1], xyz[2]);
+    PointValues values;
+    if (builder.columns() != 0) {
+      AttributeCollector attributes{header.attributes};
+      for (std::size_t p = 0; p < vertex.properties.size(); ++p) {
+        if (vertex.properties[p].is_list) continue;
+        const std::string_view token = tokens[token_of_property[p]];
+        double value = 0.0;
+        if (p != header.xyz_properties[0] && p != header.xyz_properties[1] && p != header.xyz_properties[2] &&
+            (p == header.attributes.intensity || p == header.attributes.time || p == header.attributes.ring ||
+             p == header.attributes.rgb[0] || p == header.attributes.rgb[1] || p == header.attributes.rgb[2])) {
+          if (detail::parse_double(token, value) != detail::NumberStatus::kOk) {
+            reader.fail(vertex.properties[p].name + " value " + detail::quoted(token) + " is not a number");
+          }
+          attributes.take(p, value);
+        }
+      }
+      values = attributes.finish();
+    }
+    const auto added = builder.add(xyz[0], xyz[1], xyz[2], values);
     if (added != detail::ScanBuilder::AddResult::kOk) reader.fail(builder.describe(added), builder.problem_of(added));
   }
   if (builder.size() == 0) {
@@ -421,6 +513,7 @@ Scan read_ply(const fs::path& path, const ReadSettings& settings) {
   LineReader reader(bytes, path.string());
   detail::ScanBuilder builder(path, settings, LengthUnit::kMetre);
   const PlyHeader header = read_header(reader, settings);
+  builder.carries(header.attributes.columns());
   if (header.encoding == PlyEncoding::kAscii) {
     read_ascii_data(reader, header, builder, bytes.size());
   } else {
@@ -429,6 +522,73 @@ Scan read_ply(const fs::path& path, const ReadSettings& settings) {
     read_binary_vertices(cursor, header, builder);
   }
   return builder.finish(/*split_unmarked=*/false);
+}
+
+namespace {
+/// The width of the vertex count in a streamed header: written blank-padded, patched at the end.
+constexpr std::size_t kCountWidth = 20;
+}  // namespace
+
+struct PlyStreamWriter::File {
+  explicit File(const fs::path& path) : file(path) {}
+  AtomicOutputFile file;
+};
+
+PlyStreamWriter::PlyStreamWriter(const fs::path& path, Layout layout)
+    : file_(std::make_unique<File>(path)), layout_(std::move(layout)) {
+  std::string header = "ply\nformat binary_little_endian 1.0\n";
+  for (const std::string& comment : layout_.comments) header += "comment " + comment + "\n";
+  header += "element vertex ";
+  count_offset_ = header.size();
+  header += std::string(kCountWidth, ' ') + "\n";
+  const char* coordinate = layout_.double_coordinates ? "double" : "float";
+  for (const char* axis : {"x", "y", "z"}) header += std::string("property ") + coordinate + " " + axis + "\n";
+  const std::uint8_t a = layout_.attributes;
+  if (a & kIntensity) header += "property float intensity\n";
+  if (a & kColour) header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+  if (a & kTime) header += "property double time\n";
+  if (a & kRing) header += "property ushort ring\n";
+  if (a & kReturnNumber) header += "property uchar return_number\n";
+  if (layout_.scan_index) header += "property uint scan\n";
+  header += "end_header\n";
+  file_->file.stream().write(header.data(), static_cast<std::streamsize>(header.size()));
+}
+
+PlyStreamWriter::~PlyStreamWriter() = default;
+
+void PlyStreamWriter::write(std::span<const Eigen::Vector3d> points, const PointAttributes& attributes,
+                            std::uint32_t scan) {
+  const std::uint8_t a = layout_.attributes;
+  buffer_.clear();
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    for (int axis = 0; axis < 3; ++axis) {
+      if (layout_.double_coordinates) detail::append_le(buffer_, points[i][axis]);
+      else detail::append_le(buffer_, static_cast<float>(points[i][axis]));
+    }
+    if (a != 0) {
+      const PointValues v = attributes.at(i);
+      if (a & kIntensity) detail::append_le(buffer_, v.intensity);
+      if (a & kColour) {
+        for (const int shift : {16, 8, 0}) detail::append_le(buffer_, static_cast<std::uint8_t>((v.rgb >> shift) & 0xFF));
+      }
+      if (a & kTime) detail::append_le(buffer_, v.time_s);
+      if (a & kRing) detail::append_le(buffer_, v.ring);
+      if (a & kReturnNumber) detail::append_le(buffer_, v.return_number);
+    }
+    if (layout_.scan_index) detail::append_le(buffer_, scan);
+  }
+  std::ostream& out = file_->file.stream();
+  out.write(buffer_.data(), static_cast<std::streamsize>(buffer_.size()));
+  if (!out) throw OutputError("cannot write " + file_->file.path().string() + ": write failed (disk full?)");
+  count_ += points.size();
+}
+
+void PlyStreamWriter::finish() {
+  std::ostream& out = file_->file.stream();
+  const std::string count = std::to_string(count_);
+  out.seekp(static_cast<std::streamoff>(count_offset_));
+  out.write(count.data(), static_cast<std::streamsize>(count.size()));
+  file_->file.commit();
 }
 
 void write_ply(const fs::path& path, std::span<const Eigen::Vector3f> points_cm, bool binary, LengthUnit unit) {

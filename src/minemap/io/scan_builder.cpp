@@ -17,9 +17,10 @@ ScanBuilder::ScanBuilder(const std::filesystem::path& path, const ReadSettings& 
       points_per_slice_(settings.points_per_slice),
       detect_slices_(settings.detect_slices),
       max_points_(settings.max_points),
-      report_(settings.report) {}
+      report_(settings.report),
+      wanted_(settings.attributes) {}
 
-ScanBuilder::AddResult ScanBuilder::add(double x, double y, double z) {
+ScanBuilder::AddResult ScanBuilder::add(double x, double y, double z, const PointValues& values) {
   if (std::isnan(x) || std::isnan(y) || std::isnan(z)) {
     ++nan_dropped_;
     return AddResult::kOk;
@@ -37,6 +38,7 @@ ScanBuilder::AddResult ScanBuilder::add(double x, double y, double z) {
   constexpr double kFloatMax = std::numeric_limits<float>::max();
   if (!(local.cwiseAbs().maxCoeff() <= kFloatMax)) return AddResult::kOutOfFloatRange;
   points_cm_.push_back(local.cast<float>());
+  if (columns_ != 0) attributes_.push_back(values, columns_);
   return AddResult::kOk;
 }
 
@@ -83,6 +85,7 @@ Scan ScanBuilder::finish(bool split_unmarked) {
   // points at once. A reader that sized them well (uos counts its lines) skips the copy.
   if (points_cm_.capacity() - points_cm_.size() > points_cm_.size() / 16) points_cm_.shrink_to_fit();
   scan.points_cm = std::move(points_cm_);
+  scan.attributes = std::move(attributes_);
   scan.local_origin_cm = local_origin_cm_;
   scan.recentre_if_far(kFarFromOrigin_cm);
   return scan;

@@ -42,11 +42,25 @@ class ScanBuilder {
   LengthUnit unit() const { return unit_; }
   std::uint64_t max_points() const { return max_points_; }
   std::size_t size() const { return points_cm_.size(); }
-  void reserve(std::size_t count) { points_cm_.reserve(count); }
+  void reserve(std::size_t count) {
+    points_cm_.reserve(count);
+    if (columns_ & kIntensity) attributes_.intensity.reserve(count);
+    if (columns_ & kColour) attributes_.rgb.reserve(count);
+    if (columns_ & kTime) attributes_.time_s.reserve(count);
+    if (columns_ & kRing) attributes_.ring.reserve(count);
+    if (columns_ & kReturnNumber) attributes_.return_number.reserve(count);
+  }
 
-  /// Adds a point given in the file's unit and frame. A point with a NaN coordinate is dropped and
-  /// counted; callers refuse infinite values first, as only they know the line or byte to report.
-  [[nodiscard]] AddResult add(double x, double y, double z);
+  /// The attributes the file carries (PointAttribute bits); the scan keeps those of them that
+  /// ReadSettings::attributes asks for. Call before the first add.
+  void carries(std::uint8_t columns) { columns_ = columns & wanted_; }
+  /// The attributes kept: what add's `values` must hold.
+  std::uint8_t columns() const { return columns_; }
+
+  /// Adds a point given in the file's unit and frame, with its attribute values (those of columns()).
+  /// A point with a NaN coordinate is dropped and counted, its values with it; callers refuse
+  /// infinite values first, as only they know the line or byte to report.
+  [[nodiscard]] AddResult add(double x, double y, double z, const PointValues& values = {});
 
   /// Points dropped because a coordinate was NaN.
   std::uint64_t nan_dropped() const { return nan_dropped_; }
@@ -84,6 +98,9 @@ class ScanBuilder {
   bool origin_chosen_ = false;
   Eigen::Vector3d local_origin_cm_ = Eigen::Vector3d::Zero();
   std::vector<Eigen::Vector3f> points_cm_;
+  std::uint8_t wanted_ = kAllPointAttributes;
+  std::uint8_t columns_ = 0;
+  PointAttributes attributes_;
   std::vector<std::size_t> slice_starts_;
 };
 

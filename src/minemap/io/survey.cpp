@@ -432,6 +432,34 @@ void keep_range(FolderContent& content, const SurveyReadSettings& settings) {
   }
 }
 
+/// Moves a survey in world coordinates near zero (Survey::origin_cm): its origin is `given`, or the
+/// first scan's position in whole metres when that lies beyond kWorldCoordinates_cm. The files'
+/// frame and the world both move by -origin: each scan's points keep their float values (their
+/// local origin moves), and each pose T_world_file becomes T(-o) T_world_file T(o), the identity
+/// staying the identity, so poses, views and .pose files stay near zero.
+void choose_local_origin(Survey& survey, const std::optional<Eigen::Vector3d>& given) {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  if (given) {
+    origin = *given;
+  } else if (!survey.scans.empty()) {
+    const Eigen::Vector3d first = survey.scans.front().world_from_points().block<3, 1>(0, 3);
+    if (first.norm() > kWorldCoordinates_cm) origin = (first / 100.0).array().round().matrix() * 100.0;
+  }
+  survey.origin_cm = origin;
+  if (origin.isZero()) return;
+  const auto moved = [&](Pose pose) {  // T(-o) * pose * T(o)
+    pose.block<3, 1>(0, 3) += pose.block<3, 3>(0, 0) * origin - origin;
+    return pose;
+  };
+  for (Scan& scan : survey.scans) {
+    scan.local_origin_cm -= origin;
+    scan.pose_cm = moved(scan.pose_cm);
+  }
+  if (survey.truth_cm) {
+    for (Pose& pose : *survey.truth_cm) pose = moved(pose);
+  }
+}
+
 void read_native_survey(const fs::path& dir, const SurveyReadSettings& settings, Survey& survey, DroppedPoints& dropped,
                         std::vector<std::uint64_t>& numbers, std::string (*&name_of)(std::uint64_t)) {
   FolderContent content = list_folder(dir);
@@ -524,6 +552,20 @@ Survey read_foreign_survey(const fs::path& path, const SurveyReadSettings& setti
 
 void set_foreign_survey_reader(ForeignSurveyReader reader) { foreign_reader() = std::move(reader); }
 
+Scan read_scan_file(const fs::path& path, const std::string& format, const ReadSettings& settings) {
+  if (format == "uos") return read_uos_points(path, settings);
+  if (format == "pcd") return read_pcd(path, settings);
+  if (format == "ply") return read_ply(path, settings);
+  if (format == "kitti") {
+    if (path.filename() != "points.bin") return read_kitti_bin(path, settings, 4);
+    Scan scan = read_kitti_bin(path, settings, 3);
+    scan.name = path.parent_path().filename().string();  // "000002", not "points"
+    return scan;
+  }
+  detail::fail_in_file(path.string(), "is of the survey format '" + format +
+                                          "', which the C++ readers do not read (LAS/LAZ and E57: the Python package)");
+}
+
 bool is_foreign_survey(const fs::path& path) {
   std::error_code error;
   if (!fs::is_directory(path, error)) return is_foreign_file(path);
@@ -584,6 +626,9 @@ Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
   if (settings.reference_poses) {
     survey.truth_cm = read_pose_list(*settings.reference_poses, survey.unit, survey.scans.size(), read,
                                      settings.first_scan, ranged(settings));
+  }
+  if (survey.format != "las" && survey.format != "laz" && survey.format != "e57") {
+    choose_local_origin(survey, settings.origin_cm);  // LAS/LAZ and E57 readers choose their own
   }
 
   // The survey as a whole, now that every file parsed.

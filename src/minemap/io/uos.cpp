@@ -130,15 +130,18 @@ Scan read_uos_points(const fs::path& path, const ReadSettings& settings) {
     if (columns == 0) {
       columns = count;
       first_point_line = reader.line_number();
+      if (columns == 4) builder.carries(kIntensity);  // the reflectance, kept as the intensity
     }
-    // x y z: NaN drops the point (ScanBuilder), inf fails it. The reflectance is not used.
+    // x y z: NaN drops the point (ScanBuilder), inf fails it.
     for (std::size_t i = 0; i < 3; ++i) {
       if (std::isinf(values[i])) {
         reader.fail("value " + std::to_string(i + 1) + " " + detail::quoted(tokens[i]) + " is not finite",
                     InputProblem::kNonFinite);
       }
     }
-    const auto added = builder.add(values[0], values[1], values[2]);
+    PointValues attributes;
+    attributes.intensity = static_cast<float>(values[3]);
+    const auto added = builder.add(values[0], values[1], values[2], attributes);
     if (added != detail::ScanBuilder::AddResult::kOk) reader.fail(builder.describe(added), builder.problem_of(added));
   }
   if (builder.size() == 0) {

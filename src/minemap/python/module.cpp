@@ -15,6 +15,7 @@
 #include <pybind11/stl.h>
 
 #include <cmath>
+#include <cstring>
 #include <optional>
 #include <string>
 #include <vector>
@@ -336,6 +337,66 @@ cli::ExtraOutputs extra_outputs_with_python() {
   };
 }
 
+// ---- exports: the C++ stream of placed scans, written by the package's LAS/LAZ, COPC and E57 writers --
+
+std::optional<py::function>& python_export_writer() {
+  static std::optional<py::function> writer;
+  return writer;
+}
+
+/// One exported scan as arrays: points (N, 3) float64 in the export's frame and unit, and each
+/// attribute the scan carries (intensity float32, rgb uint32 0xRRGGBB, time float64, ring uint16,
+/// return_number uint8).
+py::dict exported_scan_dict(ExportedScan scan) {
+  py::dict d;
+  d["index"] = scan.index;
+  d["name"] = scan.name;
+  d["source"] = scan.source;
+  py::array_t<double> points({static_cast<py::ssize_t>(scan.points.size()), py::ssize_t{3}});
+  std::memcpy(points.mutable_data(), scan.points.data(), scan.points.size() * sizeof(Eigen::Vector3d));
+  d["points"] = points;
+  const auto column = [&](const char* name, const auto& values) {
+    if (values.empty()) return;
+    using T = typename std::decay_t<decltype(values)>::value_type;
+    py::array_t<T> array(static_cast<py::ssize_t>(values.size()));
+    std::memcpy(array.mutable_data(), values.data(), values.size() * sizeof(T));
+    d[name] = array;
+  };
+  column("intensity", scan.attributes.intensity);
+  column("rgb", scan.attributes.rgb);
+  column("time", scan.attributes.time_s);
+  column("ring", scan.attributes.ring);
+  column("return_number", scan.attributes.return_number);
+  return d;
+}
+
+ExportSummary summary_of(const py::dict& d) {
+  ExportSummary summary;
+  summary.scans = py::cast<std::size_t>(d["scans"]);
+  summary.points = py::cast<std::uint64_t>(d["points"]);
+  summary.attributes = py::cast<std::uint8_t>(d["attributes"]);
+  summary.completed = py::cast<bool>(d["completed"]);
+  if (d.contains("warnings")) summary.warnings = py::cast<std::vector<std::string>>(d["warnings"]);
+  return summary;
+}
+
+/// Hooks::export_writer: the package's minemap.export.write (GIL taken for the call; the stream
+/// releases it while it reads a scan).
+cli::ExportWriter export_writer_with_python() {
+  return [](SurveyExport& scans, const std::filesystem::path& path, const std::function<bool()>& stop) {
+    py::gil_scoped_acquire gil;
+    if (!python_export_writer()) throw OutputError(path.string() + ": the package's export writer is not loaded");
+    try {
+      const py::object result = (*python_export_writer())(py::cast(&scans, py::return_value_policy::reference),
+                                                          path.string(), py::cpp_function(stop));
+      return summary_of(py::cast<py::dict>(result));
+    } catch (py::error_already_set& e) {
+      if (e.matches(py::module_::import("minemap._core").attr("InputError"))) throw_input_error(py::str(e.value()), path.string());
+      throw OutputError(path.string() + ": " + std::string(py::str(e.value())));
+    }
+  };
+}
+
 // ---- the API ------------------------------------------------------------------------------------
 
 cli::MapCommand parse(const std::vector<std::string>& args) {
@@ -443,6 +504,7 @@ PYBIND11_MODULE(_core, m) {
     py::gil_scoped_release no_gil;
     cli::Hooks hooks;
     hooks.extra_outputs = extra_outputs_with_python();
+    hooks.export_writer = export_writer_with_python();
     return cli::run(args, hooks);
   }, py::arg("args"), "Runs the command line (arguments without the program name); returns the exit code.");
 
@@ -471,6 +533,62 @@ PYBIND11_MODULE(_core, m) {
       io::set_foreign_survey_reader(read_with_python);
     }
   }, py::arg("reader"));
+  py::class_<SurveyExport>(m, "SurveyExport",
+                           "The registered survey, scan by scan, as `minemap export` streams it (report/survey_export.hpp).")
+      .def(py::init([](const std::string& out, const std::string& frame, double voxel_cm,
+                       const std::vector<std::string>& scans) {
+             ExportSettings settings;
+             if (frame != "z-up" && frame != "survey") throw py::value_error("frame: 'z-up' or 'survey', not '" + frame + "'");
+             settings.frame = frame == "survey" ? ExportSettings::Frame::kSurvey : ExportSettings::Frame::kZUp;
+             settings.voxel_cm = voxel_cm;
+             settings.scans = scans;
+             return std::make_unique<SurveyExport>(out, settings);
+           }),
+           py::arg("out"), py::arg("frame") = "z-up", py::arg("voxel_cm") = 0.0,
+           py::arg("scans") = std::vector<std::string>{})
+      .def("next", [](SurveyExport& self) -> py::object {
+             std::optional<ExportedScan> scan;
+             {
+               py::gil_scoped_release no_gil;
+               scan = self.next();
+             }
+             if (!scan) return py::none();
+             return exported_scan_dict(std::move(*scan));
+           }, "The next scan as arrays (a dict), or None after the last.")
+      .def("attributes", &SurveyExport::attributes, "The first scan's attributes (a PointAttribute mask).")
+      .def_property_readonly("scans", &SurveyExport::scans)
+      .def_property_readonly("points_expected", &SurveyExport::points_expected)
+      .def_property_readonly("frame_description", &SurveyExport::frame_description)
+      .def_property_readonly("unit", [](const SurveyExport& self) { return std::string(to_string(self.unit())); })
+      .def_property_readonly("origin", [](const SurveyExport& self) {
+        const Eigen::Vector3d o = self.origin();
+        return py::make_tuple(o.x(), o.y(), o.z());
+      })
+      .def_property_readonly("survey", &SurveyExport::survey)
+      .def_property_readonly("skipped", &SurveyExport::skipped);
+  m.attr("attribute_bits") = py::dict(py::arg("intensity") = int(kIntensity), py::arg("colour") = int(kColour),
+                                      py::arg("time") = int(kTime), py::arg("ring") = int(kRing),
+                                      py::arg("return_number") = int(kReturnNumber));
+  m.def("describe_attributes", &describe_attributes, py::arg("mask"));
+  m.def("write_export_ply", [](SurveyExport& scans, const std::string& path) {
+    ExportSummary summary;
+    {
+      py::gil_scoped_release no_gil;
+      summary = write_export_ply(scans, path);
+    }
+    py::dict d;
+    d["scans"] = summary.scans;
+    d["points"] = summary.points;
+    d["attributes"] = summary.attributes;
+    d["completed"] = summary.completed;
+    d["warnings"] = summary.warnings;
+    return d;
+  }, py::arg("scans"), py::arg("path"));
+  m.def("set_export_writer", [](py::object writer) {
+    if (writer.is_none()) python_export_writer().reset();
+    else python_export_writer() = py::cast<py::function>(writer);
+  }, py::arg("writer"));
+
   m.def("set_extra_outputs", [](py::object writer) {
     if (writer.is_none()) python_extra_outputs().reset();
     else python_extra_outputs() = py::cast<py::function>(writer);
@@ -480,6 +598,7 @@ PYBIND11_MODULE(_core, m) {
     io::set_foreign_survey_reader({});
     python_reader().reset();
     python_extra_outputs().reset();
+    python_export_writer().reset();
   }));
 
   m.def("read_survey", [](const std::string& path, const std::vector<std::string>& args) {

@@ -114,6 +114,8 @@ canvas { display: block; }
 #panel label { margin-right: 10px; white-space: nowrap; }
 #scale { left: 8px; bottom: 8px; padding: 6px 10px; }
 #scale-bar { height: 5px; border: 2px solid #e8e8e8; border-top: none; min-width: 1px; }
+#colour-bar { height: 10px; width: 220px; margin: 3px 0 1px; border-radius: 2px; }
+#colour-ends { width: 220px; display: flex; justify-content: space-between; }
 #info { right: 8px; bottom: 8px; max-width: 420px; }
 #info h2 { font-size: 14px; margin: 0 0 4px; }
 #info .doubt { color: #ffb347; }
@@ -124,9 +126,10 @@ canvas { display: block; }
 <div id="panel" class="box">
 <h1 id="map-title">@TITLE@</h1>
 <div id="counts" class="dim"></div>
-<div>colour: <label><input type="radio" name="colour" value="height" checked> height</label><label><input type="radio" name="colour" value="scan"> scan</label>
+<div>colour: <label><input type="radio" name="colour" value="height" checked> height</label><label><input type="radio" name="colour" value="scan"> scan</label><label id="intensity-choice" hidden><input type="radio" name="colour" value="intensity"> intensity</label>
 point size <input id="point-size" type="range" min="1" max="6" step="1" value="2" style="width:70px;vertical-align:middle"></div>
 <div id="legend" class="dim"></div>
+<div id="colour-bar"></div><div id="colour-ends" class="dim"><span id="colour-lo"></span><span id="colour-hi"></span></div>
 <div class="dim">drag: orbit · right drag or shift+drag: pan · wheel: zoom · click a scan position (red): its match</div>
 </div>
 <div id="scale" class="box" title="at the orbit centre"><div id="scale-bar"></div><span id="scale-label"></span></div>
@@ -172,13 +175,22 @@ constexpr std::string_view kViewerJs = R"JS(
 
   function grouped(n) { return String(n).replace(/\B(?=(\d{3})+(?!\d))/g, ','); }
 
-  // Blue to red through cyan, green and yellow: distinct on a dark background at both ends.
+  // Height: blue to red through cyan, green and yellow, distinct on a dark background at both ends.
+  // Intensity: dark to light, as laser returns are shown.
   var heightStops = [[59, 76, 192], [68, 190, 230], [120, 210, 90], [250, 210, 60], [220, 60, 40]];
-  function rampColour(t, out, k) {
-    var x = Math.min(Math.max(t, 0), 1) * (heightStops.length - 1);
-    var i = Math.min(Math.floor(x), heightStops.length - 2), f = x - i;
-    var a = heightStops[i], b = heightStops[i + 1];
+  var intensityStops = [[80, 80, 92], [140, 140, 148], [200, 200, 180], [255, 250, 225]];
+  function rampColour(t, out, k, stops) {
+    stops = stops || heightStops;
+    var x = Math.min(Math.max(t, 0), 1) * (stops.length - 1);
+    var i = Math.min(Math.floor(x), stops.length - 2), f = x - i;
+    var a = stops[i], b = stops[i + 1];
     out[k] = a[0] + (b[0] - a[0]) * f; out[k + 1] = a[1] + (b[1] - a[1]) * f; out[k + 2] = a[2] + (b[2] - a[2]) * f;
+  }
+  // The colour bar of a ramp: a CSS gradient through its stops.
+  function gradientOf(stops) {
+    return 'linear-gradient(to right, ' + stops.map(function (c, i) {
+      return 'rgb(' + c.join(',') + ') ' + (100 * i / (stops.length - 1)).toFixed(0) + '%';
+    }).join(', ') + ')';
   }
   // Scan s gets hue s * golden ratio: neighbouring scans differ, colours never run out.
   function scanColour(s, out, k) {
@@ -229,6 +241,19 @@ constexpr std::string_view kViewerJs = R"JS(
       var c = 3 * qHeight[i];
       heightColours[k] = lut[c]; heightColours[k + 1] = lut[c + 1]; heightColours[k + 2] = lut[c + 2];
     }
+    // Intensity: one byte a point, the ramp over the 2nd to 98th percentile (meta.intensity).
+    var intensityColours = null;
+    if (meta.intensity) {
+      var levels = decodeBase64(text('minemap-intensity'));
+      if (levels.length !== n) throw new Error('the intensity data is damaged (' + levels.length + ' of ' + n + ' points)');
+      intensityColours = new Uint8Array(3 * n);
+      var ilut = new Uint8Array(3 * 256);
+      for (q = 0; q < 256; ++q) rampColour(q / 255, ilut, 3 * q, intensityStops);
+      for (i = 0, k = 0; i < n; ++i, k += 3) {
+        var v = 3 * levels[i];
+        intensityColours[k] = ilut[v]; intensityColours[k + 1] = ilut[v + 1]; intensityColours[k + 2] = ilut[v + 2];
+      }
+    }
     var scanColours = null;  // made on the first switch to "scan"
     function makeScanColours() {
       var out = new Uint8Array(3 * n), at = 0, rgb = new Uint8Array(3);
@@ -256,7 +281,7 @@ constexpr std::string_view kViewerJs = R"JS(
 
     var geometry = new THREE.BufferGeometry();
     geometry.setAttribute('position', new THREE.BufferAttribute(positions, 3));
-    var colourAttribute = new THREE.BufferAttribute(heightColours, 3, true);
+    var colourAttribute = new THREE.BufferAttribute(intensityColours || heightColours, 3, true);
     geometry.setAttribute('color', colourAttribute);
     var pointMaterial = new THREE.PointsMaterial({ size: 2, sizeAttenuation: false, vertexColors: THREE.VertexColors });
     if (n > 0) scene.add(new THREE.Points(geometry, pointMaterial));
@@ -350,15 +375,28 @@ constexpr std::string_view kViewerJs = R"JS(
     // Panel: counts, colour toggle, point size, legend.
     document.getElementById('counts').textContent = grouped(n) + (meta.points_in > n ? ' of ' + grouped(meta.points_in) : '') +
         ' map points · ' + scans.length + (scans.length === 1 ? ' scan' : ' scans');
-    var legend = document.getElementById('legend');
+    var legend = document.getElementById('legend'), bar = document.getElementById('colour-bar');
+    var barEnds = document.getElementById('colour-ends');
     function showLegend(mode) {
+      var ramp = n > 0 && mode !== 'scan';
       legend.textContent = n === 0 ? 'no map points' : mode === 'scan' ? 'each scan its own colour'
-          : 'height ' + (my + sy * lo).toFixed(1) + ' m (blue) to ' + (my + sy * hi).toFixed(1) + ' m (red)';
+          : mode === 'intensity' ? 'intensity (as the scans store it)' : 'height (m)';
+      bar.hidden = barEnds.hidden = !ramp;
+      if (!ramp) return;
+      bar.style.background = gradientOf(mode === 'intensity' ? intensityStops : heightStops);
+      var ends = mode === 'intensity' ? [meta.intensity.lo, meta.intensity.hi] : [my + sy * lo, my + sy * hi];
+      var digits = mode === 'intensity' && Math.abs(ends[1] - ends[0]) < 10 ? 3 : 1;
+      document.getElementById('colour-lo').textContent = Number(ends[0]).toFixed(digits);
+      document.getElementById('colour-hi').textContent = Number(ends[1]).toFixed(digits);
     }
-    showLegend('height');
+    if (intensityColours) {
+      document.getElementById('intensity-choice').hidden = false;
+      document.querySelector('input[name=colour][value=intensity]').checked = true;
+    }
+    showLegend(intensityColours ? 'intensity' : 'height');
     function setColouring(mode) {
       if (mode === 'scan' && !scanColours) scanColours = makeScanColours();
-      colourAttribute.array = mode === 'scan' ? scanColours : heightColours;
+      colourAttribute.array = mode === 'scan' ? scanColours : mode === 'intensity' ? intensityColours : heightColours;
       colourAttribute.needsUpdate = true;
       showLegend(mode);
       requestRender();
@@ -448,6 +486,10 @@ std::string map_html(const MapHtmlInput& input, const MapHtmlSettings& settings)
     throw std::invalid_argument("map.html: " + std::to_string(input.point_scans.size()) + " scan indices for " +
                                 std::to_string(input.points_cm.size()) + " points");
   }
+  if (!input.point_intensity.empty() && input.point_intensity.size() != input.points_cm.size()) {
+    throw std::invalid_argument("map.html: " + std::to_string(input.point_intensity.size()) + " intensities for " +
+                                std::to_string(input.points_cm.size()) + " points");
+  }
   for (const std::uint32_t scan : input.point_scans) {
     if (scan >= input.scans.size()) {
       throw std::invalid_argument("map.html: a point of scan " + std::to_string(scan) + " in a survey of " +
@@ -501,6 +543,32 @@ std::string map_html(const MapHtmlInput& input, const MapHtmlSettings& settings)
     put_u32(run_bytes, run_scan);
     put_u32(run_bytes, run_length);
   }
+  // Intensity, one byte a kept point: 0..255 over the kept points' 2nd to 98th percentile.
+  std::vector<std::uint8_t> intensity_bytes;
+  double intensity_lo = 0.0, intensity_hi = 0.0;
+  if (!input.point_intensity.empty()) {
+    std::vector<float> kept;
+    for (std::size_t k = 0; k < n_keep; ++k) {
+      const std::size_t i = kept_index(k);
+      if (input.points_cm[i].allFinite()) kept.push_back(input.point_intensity[i]);
+    }
+    if (!kept.empty()) {
+      std::vector<float> sorted = kept;
+      const auto at = [&](double fraction) {
+        const auto nth = sorted.begin() + static_cast<std::ptrdiff_t>(fraction * static_cast<double>(sorted.size() - 1));
+        std::nth_element(sorted.begin(), nth, sorted.end());
+        return static_cast<double>(*nth);
+      };
+      intensity_lo = at(0.02);
+      intensity_hi = std::max(at(0.98), intensity_lo);
+      const double span = intensity_hi > intensity_lo ? intensity_hi - intensity_lo : 1.0;
+      intensity_bytes.reserve(kept.size());
+      for (const float v : kept) {
+        const double level = std::round(255.0 * (static_cast<double>(v) - intensity_lo) / span);
+        intensity_bytes.push_back(static_cast<std::uint8_t>(std::clamp(std::isfinite(level) ? level : 0.0, 0.0, 255.0)));
+      }
+    }
+  }
 
   const double unit_per_cm = 1.0 / centimetres_per(settings.unit);
   nlohmann::json scans = nlohmann::json::array();
@@ -514,7 +582,7 @@ std::string map_html(const MapHtmlInput& input, const MapHtmlSettings& settings)
                      {"registered", scan.registered},
                      {"doubt", scan.doubt}});
   }
-  const nlohmann::json meta = {{"format", "minemap map.html 1"},
+  nlohmann::json meta = {{"format", "minemap map.html 1"},
                                {"title", settings.title},
                                {"unit", to_string(settings.unit)},
                                {"up_axis", settings.up_axis},
@@ -523,6 +591,7 @@ std::string map_html(const MapHtmlInput& input, const MapHtmlSettings& settings)
                                {"min_m", vector_json(min_cm / 100.0)},
                                {"step_m", vector_json(step_cm / 100.0)},
                                {"scans", scans}};
+  if (!intensity_bytes.empty()) meta["intensity"] = {{"lo", intensity_lo}, {"hi", intensity_hi}};
 
   const std::string title = settings.title.empty() ? std::string("minemap map") : settings.title;
   std::string head{kPageHead};
@@ -537,6 +606,10 @@ std::string map_html(const MapHtmlInput& input, const MapHtmlSettings& settings)
   append_base64(page, point_bytes);
   page += "</script>\n<script type=\"application/octet-stream\" id=\"minemap-runs\">";
   append_base64(page, run_bytes);
+  if (!intensity_bytes.empty()) {
+    page += "</script>\n<script type=\"application/octet-stream\" id=\"minemap-intensity\">";
+    append_base64(page, intensity_bytes);
+  }
   page += "</script>\n<script id=\"three-js\">\n";
   append_chunks(page, embedded::kThreeJsChunks);
   page += "\n</script>\n<script id=\"three-orbit-controls\">\n";

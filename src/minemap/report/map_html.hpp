@@ -3,7 +3,8 @@
 // self-contained page: Debian's three.js r111 and its OrbitControls inlined (embedded at build time),
 // the points and the per-scan figures as data in the page.
 //
-// The page: the map as points coloured by height (or by scan, a toggle), the trajectory as a line
+// The page: the map as points coloured by height, by scan or (where the scans carry it) by intensity,
+// a toggle, with a colour bar for the ramps; the trajectory as a line
 // with a marker at each scan position, orbit/pan/zoom, a scale bar in metres at the orbit centre,
 // and an info box with a scan's name, ICP iterations, pairs, rms and doubt when its marker is
 // clicked (or named in the address: map.html#scan=NAME). After its first render it sets
@@ -54,9 +55,13 @@ struct MapHtmlInput {
   std::span<const Eigen::Vector3f> points_cm;     ///< world-frame map points (non-finite ones skipped)
   std::span<const std::uint32_t> point_scans;     ///< each point's scan, an index into `scans`
   std::span<const MapHtmlScan> scans;             ///< in scan order: the trajectory
+  /// Each point's intensity (as the files store it), or empty: no intensity colouring. The page
+  /// holds one byte a point, the ramp spanning the kept points' 2nd to 98th percentile.
+  std::span<const float> point_intensity = {};
 };
 
-/// The page's text. Throws std::invalid_argument when point_scans and points_cm differ in length,
+/// The page's text. Throws std::invalid_argument when point_scans (or point_intensity, when given)
+/// and points_cm differ in length,
 /// a scan index is out of range, or up_axis is not 0..2.
 std::string map_html(const MapHtmlInput& input, const MapHtmlSettings& settings);
 

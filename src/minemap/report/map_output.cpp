@@ -3,6 +3,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
+#include <algorithm>
 #include <chrono>
 #include <nlohmann/json.hpp>
 
@@ -80,6 +81,9 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
   const double unit_per_cm = 1.0 / centimetres_per(output.unit);
   nlohmann::json report;
   report["unit"] = to_string(output.unit);
+  report["frame"] = output.survey_in_3dtk_frame ? "3dtk" : "z_up";  // of the poses here, and .frames / .pose
+  if (!output.survey.empty()) report["survey"] = output.survey;
+  if (!output.format.empty()) report["format"] = output.format;
   if (!output.origin_cm.isZero()) {
     report["origin"] = {output.origin_cm.x() * unit_per_cm, output.origin_cm.y() * unit_per_cm,
                         output.origin_cm.z() * unit_per_cm};
@@ -99,7 +103,8 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
     report["run_options"] = settings_json(output.settings, false);
   }
   nlohmann::json scans = nlohmann::json::array();
-  for (const auto& s : result.scans) {
+  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+    const ScanOutcome& s = result.scans[i];
     scans.push_back({{"name", s.name},
                      {"pose", pose_json(s.pose_cm, unit_per_cm)},
                      {"iterations", s.last_match.iterations()},
@@ -114,6 +119,7 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                      {"points_in", s.points_in},
                      {"points_used", s.points_used},
                      {"outliers_replaced", s.outliers_replaced}});
+    if (i < output.sources.size()) scans.back()["source"] = output.sources[i];
     if (s.health.judged) {
       const RegistrationHealth& h = s.health;
       scans.back()["health"] = {{"trusted", !h.doubtful()},
@@ -167,67 +173,132 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
   return report.dump(2) + "\n";
 }
 
+namespace {
+
+/// The map as the person-facing outputs show it: metres, right-handed, z up (MapOutputSettings).
+/// Points and positions stay in cm here (the views and map.html take cm); only the frame turns.
+struct PersonView {
+  std::vector<Eigen::Vector3f> points_cm;        ///< every scan's used points, placed
+  std::vector<float> intensity;                  ///< one per point when every scan has them, else empty
+  std::vector<std::uint32_t> point_scans;        ///< each point's scan
+  std::vector<Eigen::Vector3d> positions_cm, reference_positions_cm;
+  std::vector<io::TimedPose> trajectory_cm;      ///< T_world_scan in the person frame (cm)
+  std::vector<report::MapHtmlScan> html_scans;
+};
+
+PersonView person_view(const MappingResult& result, const std::optional<std::vector<Pose>>& truth_cm,
+                       bool from_3dtk) {
+  const auto turn = [from_3dtk](const Eigen::Vector3d& p_cm) {
+    return from_3dtk ? threedtk_to_right_handed(p_cm, 1.0) : p_cm;
+  };
+  const auto turn_pose = [from_3dtk](const Pose& pose_cm) {
+    return from_3dtk ? threedtk_pose_to_right_handed(pose_cm, 1.0) : pose_cm;
+  };
+  PersonView view;
+  const bool intensity = !result.scans.empty() && std::all_of(result.scans.begin(), result.scans.end(), [](const auto& s) {
+    return s.used_intensity && s.used_points_cm && s.used_intensity->size() == s.used_points_cm->size();
+  });
+  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+    const ScanOutcome& scan = result.scans[i];
+    view.trajectory_cm.push_back({static_cast<double>(i), turn_pose(scan.pose_cm)});
+    view.positions_cm.push_back(turn(scan.pose_cm.block<3, 1>(0, 3)));
+    const Pose placed = turn_pose(scan.world_from_points);
+    const Eigen::Matrix3d r = placed.block<3, 3>(0, 0);
+    const Eigen::Vector3d t = placed.block<3, 1>(0, 3);
+    if (scan.used_points_cm) {
+      for (const auto& p : *scan.used_points_cm) view.points_cm.push_back((r * p.cast<double>() + t).cast<float>());
+    }
+    if (intensity) view.intensity.insert(view.intensity.end(), scan.used_intensity->begin(), scan.used_intensity->end());
+    view.point_scans.resize(view.points_cm.size(), static_cast<std::uint32_t>(i));
+    // map.html's info box: why a registered scan's match is doubtful, or why an unregistered one failed.
+    view.html_scans.push_back({.name = scan.name,
+                               .position_cm = view.positions_cm.back(),
+                               .iterations = scan.last_match.iterations(),
+                               .pairs = scan.last_match.pairs,
+                               .rms_cm = scan.last_match.rms_cm,
+                               .registered = scan.registered,
+                               .doubt = !scan.registered         ? scan.failure
+                                        : scan.health.doubtful() ? scan.health.doubt
+                                                                 : ""});
+  }
+  if (truth_cm && truth_cm->size() == result.scans.size()) {
+    // Reference trajectory expressed in the master scan's frame, as the registered one is.
+    const Pose align = result.scans.front().pose_cm * rigid_inverse(truth_cm->front());
+    for (const auto& pose : *truth_cm) view.reference_positions_cm.push_back(turn((align * pose).block<3, 1>(0, 3)));
+  }
+  return view;
+}
+
+/// map.ply: the registered points the matching used, in metres, right-handed, z up, with each
+/// point's scan and (where every scan has one) its intensity.
+void write_map_ply(const std::filesystem::path& path, const PersonView& view, const MapOutputSettings& output) {
+  io::PlyStreamWriter::Layout layout;
+  layout.attributes = view.intensity.empty() ? 0 : kIntensity;
+  layout.scan_index = true;
+  layout.comments = {"minemap map: the registered points the matching used (voxel means or filtered slices)",
+                     "frame: metres, right-handed, z up" + std::string(output.survey_in_3dtk_frame
+                                                                           ? " (turned from the survey's 3DTK frame)"
+                                                                           : "")};
+  if (!output.origin_cm.isZero()) {
+    const Eigen::Vector3d origin = output.origin_cm / 100.0;
+    layout.comments.push_back("local frame: add the survey's origin " + std::to_string(origin.x()) + " " +
+                              std::to_string(origin.y()) + " " + std::to_string(origin.z()) +
+                              " m (report.json) for its own coordinates");
+  }
+  io::PlyStreamWriter ply(path, layout);
+  std::vector<Eigen::Vector3d> points;
+  PointAttributes attributes;
+  std::size_t begin = 0;
+  while (begin < view.points_cm.size()) {  // one batch per scan
+    const std::uint32_t scan = view.point_scans[begin];
+    std::size_t end = begin;
+    while (end < view.points_cm.size() && view.point_scans[end] == scan) ++end;
+    points.clear();
+    for (std::size_t k = begin; k < end; ++k) points.push_back(view.points_cm[k].cast<double>() / 100.0);
+    if (!view.intensity.empty()) attributes.intensity.assign(view.intensity.begin() + begin, view.intensity.begin() + end);
+    ply.write(points, attributes, scan);
+    begin = end;
+  }
+  ply.finish();
+}
+
+}  // namespace
+
 std::string write_map_outputs(const std::filesystem::path& out_dir, const MappingResult& result,
                               const std::optional<std::vector<Pose>>& truth_cm,
                               const std::optional<TruthComparison>& truth, const MappingSettings& settings,
                               const MapOutputSettings& output) {
   const auto start = std::chrono::steady_clock::now();
   std::filesystem::create_directories(out_dir);
-
-  std::vector<io::TimedPose> trajectory;
-  std::vector<Eigen::Vector3f> map_points;
-  std::vector<std::uint32_t> map_point_scans;  // each map point's scan: map.html colours by scan
-  std::vector<report::MapHtmlScan> html_scans;
-  std::vector<Eigen::Vector3d> positions, reference_positions;
-  // Files that do not depend on each other are written in parallel (each one atomically); the
-  // first failure propagates as it would from a serial loop.
+  // 3DTK's own files stay in the survey's frame and unit, for 3DTK's tools. Files that do not depend
+  // on each other are written in parallel (each one atomically); the first failure propagates as it
+  // would from a serial loop.
   tbb::parallel_for(std::size_t{0}, result.scans.size(), [&](std::size_t i) {
     const ScanOutcome& scan = result.scans[i];
     io::write_uos_frames(out_dir / (scan.name + ".frames"), scan.frames, output.unit);
     io::write_uos_pose(out_dir / (scan.name + ".pose"), scan.pose_cm, output.unit);
   });
-  for (std::size_t i = 0; i < result.scans.size(); ++i) {
-    const ScanOutcome& scan = result.scans[i];
-    trajectory.push_back({static_cast<double>(i), scan.pose_cm});
-    positions.push_back(scan.pose_cm.block<3, 1>(0, 3));
-    const Eigen::Matrix3d r = scan.world_from_points.block<3, 3>(0, 0);
-    const Eigen::Vector3d t = scan.world_from_points.block<3, 1>(0, 3);
-    if (scan.used_points_cm) {
-      for (const auto& p : *scan.used_points_cm) map_points.push_back((r * p.cast<double>() + t).cast<float>());
-    }
-    map_point_scans.resize(map_points.size(), static_cast<std::uint32_t>(i));
-    // map.html's info box: why a registered scan's match is doubtful, or why an unregistered one failed.
-    html_scans.push_back({.name = scan.name,
-                          .position_cm = positions.back(),
-                          .iterations = scan.last_match.iterations(),
-                          .pairs = scan.last_match.pairs,
-                          .rms_cm = scan.last_match.rms_cm,
-                          .registered = scan.registered,
-                          .doubt = !scan.registered         ? scan.failure
-                                   : scan.health.doubtful() ? scan.health.doubt
-                                                            : ""});
-  }
-  if (truth_cm && truth_cm->size() == result.scans.size()) {
-    // Reference trajectory expressed in the master scan's frame, as the registered one is.
-    const Pose align = result.scans.front().pose_cm * rigid_inverse(truth_cm->front());
-    for (const auto& pose : *truth_cm) reference_positions.push_back((align * pose).block<3, 1>(0, 3));
-  }
-  report::MapViewSettings view;
-  view.up_axis = output.up_axis;
-  view.title = output.title;
-  const report::MapViewInput input{map_points, positions, reference_positions};
+  // What a person opens: metres, right-handed, z up.
+  const PersonView view = person_view(result, truth_cm, output.survey_in_3dtk_frame);
+  report::MapViewSettings views;
+  views.up_axis = 2;
+  views.title = output.title;
+  const report::MapViewInput input{view.points_cm, view.positions_cm, view.reference_positions_cm};
   report::MapHtmlSettings html;
-  html.up_axis = output.up_axis;
-  html.unit = output.unit;
+  html.up_axis = 2;
+  html.unit = LengthUnit::kMetre;
   html.title = output.title;
   tbb::parallel_invoke(
       [&] {
-        io::write_tum(out_dir / "trajectory.tum", trajectory, output.unit);
-        io::write_ply(out_dir / "map.ply", map_points, true, output.unit);
+        io::write_tum(out_dir / "trajectory.tum", view.trajectory_cm, LengthUnit::kMetre);
+        write_map_ply(out_dir / "map.ply", view, output);
       },
-      [&] { report::write_top_view_png(out_dir / "top.png", input, view); },
-      [&] { report::write_side_view_png(out_dir / "side.png", input, view); },
-      [&] { report::write_map_html(out_dir / "map.html", {map_points, map_point_scans, html_scans}, html); });
+      [&] { report::write_top_view_png(out_dir / "top.png", input, views); },
+      [&] { report::write_side_view_png(out_dir / "side.png", input, views); },
+      [&] {
+        report::write_map_html(out_dir / "map.html", {view.points_cm, view.point_scans, view.html_scans, view.intensity},
+                               html);
+      });
 
   const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const std::string text = map_report(result, truth, settings, output, write_s);

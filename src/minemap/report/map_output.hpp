@@ -3,6 +3,11 @@
 // trajectory as TUM, the merged reduced map as PLY, report.json, the paper's Fig. 6 views
 // (top.png, side.png) and map.html, a 3D view for a browser. Every file is written atomically
 // (temp file + rename).
+//
+// Frames and units: what a person opens (map.ply, trajectory.tum, map.html, top.png, side.png) is
+// in metres, right-handed, z up, whatever the survey's frame (a uos survey's 3DTK frame is turned:
+// x = z_3dtk, y = -x_3dtk, z = y_3dtk). 3DTK's own files (.frames, .pose) and report.json keep the
+// survey's frame and unit (report.json says which: "unit", "frame"), for 3DTK's tools and exports.
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -28,8 +33,12 @@ struct RecordedSetting {
 };
 
 struct MapOutputSettings {
-  LengthUnit unit = LengthUnit::kCentimetre;  ///< the survey's unit: poses and map are written in it
-  int up_axis = 1;                            ///< 1 (y) for 3DTK frames, 2 (z) for right-handed ones
+  LengthUnit unit = LengthUnit::kCentimetre;  ///< the survey's unit: .frames, .pose and report.json use it
+  /// The survey is in 3DTK's frame (io::Survey::frame_3dtk): the person-facing outputs turn it.
+  bool survey_in_3dtk_frame = true;
+  std::string survey;                         ///< the survey's path (report.json "survey")
+  std::string format;                         ///< its format ("uos", "pcd", ...: report.json "format")
+  std::vector<std::string> sources;           ///< each scan's file (report.json scans[i].source)
   std::string title;                          ///< drawn on the pictures
   double load_s = 0.0;                        ///< reading time, for the report
   std::string backend_choice;                 ///< how the backend was chosen (make_backend's message)

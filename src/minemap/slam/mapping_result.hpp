@@ -33,6 +33,8 @@ struct ScanOutcome {
   /// The filtered points, in the points frame (shared, not copied, between results of one run;
   /// null in an outcome read back from watch.json).
   std::shared_ptr<const std::vector<Eigen::Vector3f>> used_points_cm;
+  /// Their intensities, where the scan carries them (kVoxel: each voxel's mean); null otherwise.
+  std::shared_ptr<const std::vector<float>> used_intensity;
   Pose world_from_points = Pose::Identity();    ///< final T_world_points (places used_points_cm)
   bool registered = true;                   ///< false: no registration succeeded; pose from odometry
   std::string failure;                      ///< why, when !registered

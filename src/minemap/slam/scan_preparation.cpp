@@ -9,7 +9,11 @@ namespace minemap::detail {
 ScanPreparation::VoxelMeans ScanPreparation::voxel_means(const Scan& scan) const {
   VoxelMeans means;
   if (settings_.reduction != Reduction::kVoxel) return means;
-  means.data = voxel_mean_filter(scan.points_cm, settings_.voxel_cm);
+  if (scan.attributes.intensity.empty()) {
+    means.data = voxel_mean_filter(scan.points_cm, settings_.voxel_cm);
+  } else {
+    means.data = voxel_mean_filter(scan.points_cm, settings_.voxel_cm, scan.attributes.intensity, means.intensity);
+  }
   if (settings_.voxel_models()) means.model = voxel_mean_filter(scan.points_cm, settings_.model_voxel_cm);
   return means;
 }
@@ -39,6 +43,7 @@ ScanPreparation::Reduced ScanPreparation::reduce(const Scan& scan, VoxelMeans vo
     std::vector<Eigen::Vector3f> points;
     if (settings_.reduction == Reduction::kVoxel) {
       points = std::move(voxel.data);
+      reduced.intensity = std::move(voxel.intensity);
       reduced.has_model = !voxel.model.empty();
       reduced.model = std::move(voxel.model);
     } else {
@@ -62,13 +67,20 @@ ScanPreparation::Reduced ScanPreparation::reduce(const Scan& scan, VoxelMeans vo
   return reduced;
 }
 
+void ScanPreparation::keep_for_the_map(PreparedScan& prepared, const Scan& scan, Reduced& reduced) const {
+  prepared.points_in = scan.size();
+  prepared.outliers_replaced = reduced.outliers_replaced;
+  prepared.used_points_cm = std::make_shared<const std::vector<Eigen::Vector3f>>(reduced.data);
+  if (!reduced.intensity.empty()) {
+    prepared.used_intensity = std::make_shared<const std::vector<float>>(std::move(reduced.intensity));
+  }
+}
+
 PreparedScan ScanPreparation::prepare(const Scan& scan, RunControl& control) {
   VoxelMeans voxel = control.timed(&StageTimes::filter_s, [&] { return voxel_means(scan); });
   Reduced reduced = reduce(scan, std::move(voxel), control);
   PreparedScan prepared;
-  prepared.points_in = scan.size();
-  prepared.outliers_replaced = reduced.outliers_replaced;
-  prepared.used_points_cm = std::make_shared<const std::vector<Eigen::Vector3f>>(reduced.data);
+  keep_for_the_map(prepared, scan, reduced);
   control.timed(&StageTimes::tree_build_s, [&] {
     prepared.cloud = backend_.prepare(std::move(reduced.data), settings_.tree);
     prepared.model_cloud = reduced.has_model ? backend_.prepare(std::move(reduced.model), settings_.tree) : prepared.cloud;
@@ -91,9 +103,7 @@ std::vector<PreparedScan> ScanPreparation::prepare_all(const std::vector<Scan>& 
   std::vector<bool> has_model(n, false), has_probe(n, false);
   for (std::size_t i = 0; i < n; ++i) {  // in order: the slice filter runs on the backend
     Reduced reduced = reduce(scans[i], std::move(voxel[i]), control);
-    prepared[i].points_in = scans[i].size();
-    prepared[i].outliers_replaced = reduced.outliers_replaced;
-    prepared[i].used_points_cm = std::make_shared<const std::vector<Eigen::Vector3f>>(reduced.data);
+    keep_for_the_map(prepared[i], scans[i], reduced);
     data[i] = std::move(reduced.data);
     has_model[i] = reduced.has_model;
     has_probe[i] = reduced.has_probe;

@@ -27,6 +27,8 @@ struct PreparedScan {
   std::shared_ptr<const PreparedCloud> probe;        ///< every health.probe_stride-th data point: what judging searches
   std::optional<SurfaceNormals> planes;              ///< its model's planes, own frame (health, loop edges)
   std::shared_ptr<const std::vector<Eigen::Vector3f>> used_points_cm;  ///< the data points, for the map
+  /// Their intensities (kVoxel: each voxel's mean), for the map's colours; null where the scan has none.
+  std::shared_ptr<const std::vector<float>> used_intensity;
   std::size_t points_in = 0;
   std::size_t outliers_replaced = 0;
   const SurfaceNormals* planes_or_null() const { return planes ? &*planes : nullptr; }
@@ -48,12 +50,16 @@ class ScanPreparation {
   /// A scan's clouds before their trees: data, the denser model (if any), the health probe (if any).
   struct Reduced {
     std::vector<Eigen::Vector3f> data, model, probe;
+    std::vector<float> intensity;  ///< of `data`, where the scan has intensities
     bool has_model = false, has_probe = false;
     std::size_t outliers_replaced = 0;
   };
   struct VoxelMeans {
     std::vector<Eigen::Vector3f> data, model;
+    std::vector<float> intensity;  ///< each data voxel's mean intensity (scans that carry one)
   };
+  /// The prepared scan's points, intensities and counts, before its trees.
+  void keep_for_the_map(PreparedScan& prepared, const Scan& scan, Reduced& reduced) const;
   VoxelMeans voxel_means(const Scan& scan) const;
   /// `scan` reduced as the settings say (voxel: its voxel means, computed before).
   Reduced reduce(const Scan& scan, VoxelMeans voxel, RunControl& control);

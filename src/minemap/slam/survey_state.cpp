@@ -20,6 +20,7 @@ std::size_t SurveyState::add(const Scan& scan, PreparedScan prepared) {
   outcome.points_used = prepared.used_points_cm->size();
   outcome.outliers_replaced = prepared.outliers_replaced;
   outcome.used_points_cm = prepared.used_points_cm;
+  outcome.used_intensity = prepared.used_intensity;
   state.prepared = std::move(prepared);
   return scans_.size() - 1;
 }
@@ -56,6 +57,7 @@ void SurveyState::restore(std::size_t i, const ScanOutcome& saved) {
   restored.points_used = outcome.points_used;
   restored.outliers_replaced = outcome.outliers_replaced;
   restored.used_points_cm = outcome.used_points_cm;
+  restored.used_intensity = outcome.used_intensity;
   outcome = std::move(restored);
 }
 
