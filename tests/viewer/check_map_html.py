@@ -8,7 +8,9 @@ OUT/map.html in Debian's chromium twice, off the network, with WebGL on SwiftSha
   2. --screenshot: the middle of the picture (where no panel is) shows the map: over 1 % of its
      pixels differ from the background, in several colours.
 Neither run may print a console message (the page prints none on success). A missing chromium is
-a failure, never a skip.
+a failure, never a skip. With --survey DIR (a survey whose scans carry intensities, e.g. the shared
+mine data) it maps that survey instead, opens the page at its first scan, and the page must also
+colour by intensity: the intensity choice shown and chosen, and the colour bar labelled.
 
 Measure (--measure PAGE): opens an existing page RUNS times and prints its size, the time to its
 first render that the page reports (from navigation start) and the browser's wall time.
@@ -132,8 +134,11 @@ def check_screenshot(path):
 def run_test(args, chromium):
     work = tempfile.mkdtemp(prefix="minemap-viewer-")
     try:
-        for command in (["simulate", "--out", f"{work}/survey", "--scans", str(args.scans)],
-                        ["map", f"{work}/survey", "--out", f"{work}/out", "--threads", "2"]):
+        commands = [["simulate", "--out", f"{work}/survey", "--scans", str(args.scans)],
+                    ["map", f"{work}/survey", "--out", f"{work}/out", "--threads", "2"]]
+        if args.survey:
+            commands = [["map", args.survey, "--out", f"{work}/out", "--threads", "2", "--accept-doubtful"]]
+        for command in commands:
             done = subprocess.run([args.cli, *command], capture_output=True, text=True)
             if done.returncode != 0:
                 raise CheckFailed(f"minemap {' '.join(command)} exited {done.returncode}:\n{done.stdout}{done.stderr}")
@@ -143,7 +148,11 @@ def run_test(args, chromium):
         print(f"map.html: {os.path.getsize(page) / 1e6:.2f} MB")
         url = "file://" + page
 
-        dom, console, wall_s = run_chromium(chromium, url + "#scan=scan002", ["--dump-dom"], f"{work}/profile",
+        scan = "scan002"
+        if args.survey:
+            report = open(f"{work}/out/report.json").read()
+            scan = re.search(r'"name": "([^"]+)"', report).group(1)
+        dom, console, wall_s = run_chromium(chromium, url + "#scan=" + scan, ["--dump-dom"], f"{work}/profile",
                                             args.timeout)
         title = page_title(dom)
         figures = rendered(title)
@@ -154,8 +163,17 @@ def run_test(args, chromium):
             raise CheckFailed(f"the page did not render points; its title is {title!r}")
         info = re.search(r'<div id="info"[^>]*>(.*?)</div>\s*<div id="failure"', dom, re.S)
         info_text = re.sub(r"<[^>]+>", " ", info.group(1)) if info else ""
-        if "scan002" not in info_text or "ICP iterations" not in info_text or "rms" not in info_text:
-            raise CheckFailed(f"map.html#scan=scan002 shows no figures for scan002: {info_text!r}")
+        if scan not in info_text or "ICP iterations" not in info_text or "rms" not in info_text:
+            raise CheckFailed(f"map.html#scan={scan} shows no figures for {scan}: {info_text!r}")
+        if args.survey:
+            choice = re.search(r'<label id="intensity-choice"([^>]*)>', dom)
+            legend = re.search(r'<div id="legend"[^>]*>(.*?)</div>', dom, re.S)
+            ends = re.search(r'<span id="colour-lo">([^<]*)</span><span id="colour-hi">([^<]*)</span>', dom)
+            if not choice or "hidden" in choice.group(1):
+                raise CheckFailed("the page offers no intensity colouring for a survey with intensities")
+            if not legend or "intensity" not in legend.group(1) or not ends or not ends.group(1) or not ends.group(2):
+                raise CheckFailed(f"the page does not colour by intensity with a labelled bar: {legend and legend.group(1)!r}")
+            print(f"intensity colouring, bar {ends.group(1)} .. {ends.group(2)}")
 
         shot = f"{work}/screenshot.png"
         _, console, wall_s = run_chromium(chromium, url, [f"--screenshot={shot}"], f"{work}/profile", args.timeout)
@@ -190,6 +208,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--cli", help="the minemap program (the test)")
     parser.add_argument("--scans", type=int, default=6)
+    parser.add_argument("--survey", help="map this survey (with intensities) instead of a simulated one")
     parser.add_argument("--chromium", default="chromium")
     parser.add_argument("--timeout", type=int, default=90, help="seconds per chromium run")
     parser.add_argument("--keep", help="copy the screenshot here")
