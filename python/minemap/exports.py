@@ -148,8 +148,13 @@ def _uniform(index: np.ndarray, depth: int) -> np.ndarray:
 
 
 def _pack(cells: np.ndarray) -> np.ndarray:
-    """(N, 3) cell indices (< 2^20 each) as one int64 key per point."""
-    return (cells[:, 0] << 40) | (cells[:, 1] << 20) | cells[:, 2]
+    """(N, 3) cell indices (< 2^16 each) as one int64 key per point; a node adds its depth above
+    (depth << 48), so keys sort by depth, then cell."""
+    return (cells[:, 0] << 32) | (cells[:, 1] << 16) | cells[:, 2]
+
+
+def _unpack(keys: np.ndarray) -> np.ndarray:
+    return np.stack([(keys >> 32) & 0xFFFF, (keys >> 16) & 0xFFFF, keys & 0xFFFF], axis=1)
 
 
 def _extra_bytes_vlr(header: laspy.LasHeader, workdir: Path):
@@ -221,7 +226,7 @@ class _CopcBuild:
             k, c = np.unique(_pack(deep), return_counts=True)
             keys, inverse = np.unique(np.concatenate([keys, k]), return_inverse=True)
             counts = np.bincount(inverse, weights=np.concatenate([counts, c]).astype(np.float64)).astype(np.int64)
-        deep_cells = np.stack([keys >> 40, (keys >> 20) & 0xFFFFF, keys & 0xFFFFF], axis=1)
+        deep_cells = _unpack(keys)
         self.split = []
         for depth in range(COPC_MAX_DEPTH + 1):
             node_keys, inverse = np.unique(_pack(deep_cells >> (COPC_MAX_DEPTH - depth)), return_inverse=True)
@@ -230,7 +235,7 @@ class _CopcBuild:
             self.split.append((node_keys[busy], COPC_KEPT * COPC_NODE_POINTS / node_counts[busy]))
 
     def node_of(self, start: int, deep: np.ndarray) -> np.ndarray:
-        """Each point's node, (depth << 60) | cell key: the first node on its way down that keeps it."""
+        """Each point's node, (depth << 48) | cell key: the first node on its way down that keeps it."""
         node_depth = np.full(len(deep), -1, np.int64)
         for depth in range(COPC_MAX_DEPTH + 1):
             open_ = np.nonzero(node_depth < 0)[0]
@@ -245,7 +250,7 @@ class _CopcBuild:
             kept = np.ones(len(key), bool)  # a node not split keeps every point reaching it
             kept[inside] = _uniform(start + open_[inside], depth) < share[where[inside]]
             node_depth[open_[kept]] = depth
-        return (node_depth << 60) | _pack(deep >> (COPC_MAX_DEPTH - node_depth)[:, None])
+        return (node_depth << 48) | _pack(deep >> (COPC_MAX_DEPTH - node_depth)[:, None])
 
     def bucket(self) -> int:
         """Pass 3: every point, with its node, into one of a few bucket files (by node)."""
@@ -310,8 +315,7 @@ class _CopcBuild:
         ends = np.r_[starts[1:], len(node)]
         for begin, end in zip(starts, ends):
             key = int(node[begin])
-            depth, packed = key >> 60, key & ((1 << 60) - 1)
-            voxel = copc.VoxelKey(depth, packed >> 40, (packed >> 20) & 0xFFFFF, packed & 0xFFFFF)
+            voxel = copc.VoxelKey(key >> 48, (key >> 32) & 0xFFFF, (key >> 16) & 0xFFFF, key & 0xFFFF)
             writer.AddNode(voxel, copc.VectorChar(memoryview(records[begin:end].tobytes()).cast("b")))
 
 

@@ -115,3 +115,25 @@ def test_a_uos_survey_exports_in_metres_z_up(small_survey, tmp_path):
     # The drive runs forward (x), the roof a few metres up (z): 3DTK's y-up cm, turned.
     extent = np.array([np.ptp(laz.x), np.ptp(laz.y), np.ptp(laz.z)])
     assert extent[0] > 15 and extent[2] < 10, extent
+
+
+def test_copc_node_keys_hold_every_depth():
+    # A node's key holds its depth above its cell (depth << 48); at COPC_MAX_DEPTH, with the last
+    # cell of each axis, it must stay a positive int64 and give the same node back.
+    from minemap import exports
+
+    for depth in range(exports.COPC_MAX_DEPTH + 1):
+        cells = np.array([[0, 0, 0], [(1 << depth) - 1] * 3], np.int64)
+        keys = (np.int64(depth) << np.int64(48)) | exports._pack(cells)
+        assert (keys >= 0).all()
+        assert np.array_equal(exports._unpack(keys & ((1 << 48) - 1)), cells)
+        assert all(int(k) >> 48 == depth for k in keys)
+
+
+def test_a_map_of_arrays_has_nothing_to_export(tmp_path):
+    rng = np.random.default_rng(5)
+    cloud = rng.uniform(-5, 5, (3000, 3))
+    minemap.map_survey([cloud, cloud + [0.02, 0, 0]], out=tmp_path / "out")
+    with pytest.raises(minemap.InputError, match="arrays"):
+        minemap.export(tmp_path / "out", tmp_path / "x.ply")
+    assert not (tmp_path / "x.ply").exists()

@@ -105,7 +105,9 @@ MapOutputSettings output_settings(const MapCommand& command, const MapRun& run) 
   MapOutputSettings output;
   output.unit = run.survey.unit;
   output.survey_in_3dtk_frame = run.survey.frame_3dtk;  // the reader says which frame the survey is in
-  output.survey = options.survey.empty() ? "" : fs::absolute(options.survey).lexically_normal().string();
+  // Arrays given in Python have no folder to read again (an export refuses them by their format).
+  const bool arrays = run.survey.format == "arrays";
+  output.survey = options.survey.empty() || arrays ? "" : fs::absolute(options.survey).lexically_normal().string();
   output.format = run.survey.format;
   output.sources = run.sources;
   output.title = "minemap " + std::string(to_string(command.settings.mode)) + ": " + options.survey.filename().string();

@@ -67,6 +67,10 @@ SurveyExport::SurveyExport(const std::filesystem::path& out_dir, ExportSettings 
   if (report.is_discarded()) fail(report_path_, "is not valid JSON");
   survey_ = field(report, "survey", report_path_).get<std::string>();
   format_ = field(report, "format", report_path_).get<std::string>();
+  if (format_ == "arrays") {
+    fail(report_path_, "is the map of scans given as arrays (minemap.map_survey): there are no files to read again",
+         InputProblem::kInconsistentSurvey);
+  }
   survey_unit_ = parse_length_unit(field(report, "unit", report_path_).get<std::string>());
   survey_3dtk_ = field(report, "frame", report_path_).get<std::string>() == "3dtk";
   const json& settings_json = field(report, "settings", report_path_);
