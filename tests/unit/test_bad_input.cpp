@@ -454,7 +454,8 @@ std::vector<CliRow> cli_rows() {
          Pose far = euler_to_pose(pose);
          far(0, 3) += 10000.0;  // 100 m off: no point of scan002 near any other
          io::write_uos_pose(s / "scan002.pose", far);
-       }, 4, {"%S/scan002.3d: scan scan002 not registered: too few pairs", "nothing was written"}},
+       }, 4, {"%S/scan002.3d: scan scan002 not registered: too few pairs", "--min-overlap-pairs sets how many",
+              "nothing was written"}},
       {"survey of one scan", [=](auto& s) {
          remove_scan(s, "scan001");
          remove_scan(s, "scan002");

@@ -173,6 +173,16 @@ Verdict judge_run(const MappingResult& result, const std::vector<std::string>& s
     say(stderr, "minemap: %s: scan %s not registered: %s\n", sources[i].c_str(), s.name.c_str(),
                  s.failure.c_str());
   }
+  std::size_t too_few_pairs = 0;
+  for (const ScanOutcome& s : result.scans) too_few_pairs += !s.registered && s.failure.rfind("too few pairs", 0) == 0;
+  if (too_few_pairs > 0) {
+    // Each names its pairs; what to change is the same for all, so it is said once.
+    say(stderr,
+        "minemap: %zu scan(s) found too few pairs: the scans may not start within --max-pair-dist-cm of their "
+        "place (give --initial-poses), their unit may be wrong (--unit), or they are small: "
+        "--min-overlap-pairs sets how many pairs a match needs (default %d)\n",
+        too_few_pairs, MappingSettings{}.min_overlap_pairs);
+  }
   verdict.doubtful = result.doubtful();
   for (const std::size_t i : verdict.doubtful) {
     say(stderr, "minemap: %s: scan %s registered, but doubtful: %s\n", sources[i].c_str(),
