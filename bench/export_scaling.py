@@ -3,6 +3,7 @@
 
 usage: bench/export_scaling.py [--scans 200,500,1000] [--formats ply,laz,copc.laz] [--out DIR]
                                [--python build/venv/bin/python] [--cli build/minemap] [--keep]
+       bench/export_scaling.py --plot A.json,B.json --out DIR   (draw merged runs only)
 
 For each size, `minemap simulate --scans N` writes the drive (123 046 points a scan), `minemap map`
 maps it (the default), then each format is exported from OUT to a file at full density: .ply by the
@@ -55,6 +56,32 @@ def count_points(path, python):
     return int(out[0])
 
 
+def plot(rows, formats, svg):
+    """Time per point and peak memory against the survey's points, one line per format."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib missing: no plot", file=sys.stderr)
+        return
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.8))
+    for fmt in formats:
+        mine = sorted((r for r in rows if r["format"] == fmt), key=lambda r: r["points"])
+        left.plot([r["points"] / 1e6 for r in mine], [r["ns_per_point"] for r in mine], "o-", label=fmt)
+        right.plot([r["points"] / 1e6 for r in mine], [r["peak_rss_mb"] for r in mine], "o-", label=fmt)
+    left.set(xlabel="survey points (millions)", ylabel="time per point (ns)", title="export: time per point")
+    right.set(xlabel="survey points (millions)", ylabel="peak RSS (MB)", title="export: peak memory")
+    left.set_ylim(bottom=0)
+    right.set_ylim(bottom=0)
+    for axes in (left, right):
+        axes.grid(alpha=0.3)
+        axes.legend()
+    fig.tight_layout()
+    fig.savefig(svg)
+    print(f"wrote {svg}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scans", default="200,500,1000")
@@ -63,9 +90,15 @@ def main():
     parser.add_argument("--python", default=str(ROOT / "build" / "venv" / "bin" / "python"))
     parser.add_argument("--cli", default=str(ROOT / "build" / "minemap"))
     parser.add_argument("--keep", action="store_true")
+    parser.add_argument("--plot", metavar="JSON", help="only draw OUT/export_scaling.svg from these rows "
+                        "(export_scaling.json files, comma-separated: runs of different sizes merged)")
     args = parser.parse_args()
     out = pathlib.Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
+    if args.plot:
+        rows = [row for path in args.plot.split(",") for row in json.loads(pathlib.Path(path).read_text())]
+        plot(rows, args.formats.split(","), out / "export_scaling.svg")
+        return 0
     rows = []
     for n in [int(s) for s in args.scans.split(",")]:
         survey, mapped = out / f"survey{n}", out / f"map{n}"
@@ -94,28 +127,7 @@ def main():
             if not args.keep:
                 target.unlink()
     (out / "export_scaling.json").write_text(json.dumps(rows, indent=1) + "\n")
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("matplotlib missing: no plot", file=sys.stderr)
-        return 0
-    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.8))
-    for fmt in args.formats.split(","):
-        mine = [r for r in rows if r["format"] == fmt]
-        left.plot([r["points"] / 1e6 for r in mine], [r["ns_per_point"] for r in mine], "o-", label=fmt)
-        right.plot([r["points"] / 1e6 for r in mine], [r["peak_rss_mb"] for r in mine], "o-", label=fmt)
-    left.set(xlabel="survey points (millions)", ylabel="time per point (ns)", title="export: time per point")
-    right.set(xlabel="survey points (millions)", ylabel="peak RSS (MB)", title="export: peak memory")
-    left.set_ylim(bottom=0)
-    right.set_ylim(bottom=0)
-    for axes in (left, right):
-        axes.grid(alpha=0.3)
-        axes.legend()
-    fig.tight_layout()
-    fig.savefig(out / "export_scaling.svg")
-    print(f"wrote {out / 'export_scaling.json'} and export_scaling.svg")
+    plot(rows, args.formats.split(","), out / "export_scaling.svg")
     return 0
 
 

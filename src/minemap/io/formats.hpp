@@ -200,7 +200,7 @@ struct Survey {
   /// The survey's local frame in the files' frame (cm): file coordinates = world + origin_cm. Zero,
   /// but for surveys in world coordinates (UTM and the like: the first scan stands more than
   /// kWorldCoordinates_cm from the files' origin; LAS/LAZ and E57 choose their own): the files'
-  /// frame and the world are then both moved by -origin_cm, in whole metres (each scan's local
+  /// frame and the world are then both moved by -origin_cm, a multiple of kLocalOriginGrid_cm (each scan's local
   /// origin, and its poses, truth, initial and reference poses conjugated), so matching, poses and
   /// views stay near zero; outputs are in the local frame, report.json states the origin, and
   /// exports add it back in double.
@@ -216,6 +216,14 @@ struct Survey {
 /// A survey whose first scan stands farther than this from its files' origin is in world
 /// coordinates (Survey::origin_cm): 1 km.
 inline constexpr double kWorldCoordinates_cm = 100000.0;
+/// Local origins (the survey's, and a far scan's anchor before its points become float) are
+/// positions rounded to this grid, 100 m, per axis. Rounding is what makes a survey's numbers
+/// independent of where its files put it: a copy moved by whole hundreds of metres (a UTM offset,
+/// typically) reads to the same floats relative to the same local origin as the original, so it
+/// maps to the same local poses bit for bit. Any finer grid (whole metres, whole cm) leaves a
+/// residual shift that moves the voxel grid's phase (docs/benchmarks.md, "Surveys in world
+/// coordinates").
+inline constexpr double kLocalOriginGrid_cm = 10000.0;
 
 /// The fewest points a survey's scan may have (Horn's closed form needs three points).
 inline constexpr std::size_t kMinScanPoints = 3;

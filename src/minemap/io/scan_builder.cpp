@@ -27,14 +27,21 @@ ScanBuilder::AddResult ScanBuilder::add(double x, double y, double z, const Poin
   }
   if (points_cm_.size() >= max_points_) return AddResult::kTooManyPoints;
   const Eigen::Vector3d p_file(x, y, z);
-  const Eigen::Vector3d p_cm = right_handed_to_3dtk_ ? right_handed_to_3dtk(p_file, scale_to_cm_) : p_file * scale_to_cm_;
+  const auto to_cm = [&](const Eigen::Vector3d& v) -> Eigen::Vector3d {
+    return right_handed_to_3dtk_ ? right_handed_to_3dtk(v, scale_to_cm_) : Eigen::Vector3d(v * scale_to_cm_);
+  };
+  const Eigen::Vector3d p_cm = to_cm(p_file);
   if (!p_cm.allFinite()) return AddResult::kOutOfFloatRange;  // finite metres near DBL_MAX overflow as cm
   if (!(p_cm.cwiseAbs().maxCoeff() <= kMaxPlausibleCoordinate_cm)) return AddResult::kImplausible;
   if (!origin_chosen_) {
     origin_chosen_ = true;
-    if (p_cm.norm() > kAnchorDistance_cm) local_origin_cm_ = p_cm.array().round().matrix();
+    if (p_cm.norm() > kAnchorDistance_cm) {
+      const double grid = kLocalOriginGrid_cm / scale_to_cm_;  // 100 m in the file's unit
+      anchor_file_ = (p_file / grid).array().round().matrix() * grid;
+      local_origin_cm_ = to_cm(anchor_file_);
+    }
   }
-  const Eigen::Vector3d local = p_cm - local_origin_cm_;
+  const Eigen::Vector3d local = anchor_file_.isZero() ? p_cm : to_cm(p_file - anchor_file_);
   constexpr double kFloatMax = std::numeric_limits<float>::max();
   if (!(local.cwiseAbs().maxCoeff() <= kFloatMax)) return AddResult::kOutOfFloatRange;
   points_cm_.push_back(local.cast<float>());

@@ -5,7 +5,9 @@
 //
 // Far clouds: when the first point lies more than kAnchorDistance_cm (1 km) from the file's origin,
 // where a float in cm has steps of 0.01 cm and more, points are stored relative to that point's
-// whole-cm position, so a cloud in UTM coordinates keeps float resolution (converting to float first
+// position rounded to kLocalOriginGrid_cm (100 m: within 87 m of it, so float steps stay below
+// 0.001 cm; the grid makes a copy moved by whole hundreds of metres read to the same floats), so a
+// cloud in UTM coordinates keeps float resolution (converting to float first
 // and recentring afterwards would already have lost it). finish() then calls Scan::recentre_if_far,
 // which moves the origin to the centroid when that lies more than 100 m away. A cloud around the
 // file's origin (within 1 km) keeps origin zero unless its centroid is more than 100 m out.
@@ -97,6 +99,10 @@ class ScanBuilder {
   std::uint64_t nan_dropped_ = 0;
   bool origin_chosen_ = false;
   Eigen::Vector3d local_origin_cm_ = Eigen::Vector3d::Zero();
+  /// local_origin_cm_ in the file's frame and unit: subtracted before the unit's scale, so a file
+  /// whose coordinates are the original's plus whole hundreds of metres gives the original's
+  /// numbers exactly (scaling first rounds the sum, and the original's bits with it).
+  Eigen::Vector3d anchor_file_ = Eigen::Vector3d::Zero();
   std::vector<Eigen::Vector3f> points_cm_;
   std::uint8_t wanted_ = kAllPointAttributes;
   std::uint8_t columns_ = 0;

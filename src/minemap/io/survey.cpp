@@ -433,7 +433,8 @@ void keep_range(FolderContent& content, const SurveyReadSettings& settings) {
 }
 
 /// Moves a survey in world coordinates near zero (Survey::origin_cm): its origin is `given`, or the
-/// first scan's position in whole metres when that lies beyond kWorldCoordinates_cm. The files'
+/// first scan's position rounded to kLocalOriginGrid_cm (100 m) when that lies beyond
+/// kWorldCoordinates_cm. The files'
 /// frame and the world both move by -origin: each scan's points keep their float values (their
 /// local origin moves), and each pose T_world_file becomes T(-o) T_world_file T(o), the identity
 /// staying the identity, so poses, views and .pose files stay near zero.
@@ -443,7 +444,7 @@ void choose_local_origin(Survey& survey, const std::optional<Eigen::Vector3d>& g
     origin = *given;
   } else if (!survey.scans.empty()) {
     const Eigen::Vector3d first = survey.scans.front().world_from_points().block<3, 1>(0, 3);
-    if (first.norm() > kWorldCoordinates_cm) origin = (first / 100.0).array().round().matrix() * 100.0;
+    if (first.norm() > kWorldCoordinates_cm) origin = (first / kLocalOriginGrid_cm).array().round().matrix() * kLocalOriginGrid_cm;
   }
   survey.origin_cm = origin;
   if (origin.isZero()) return;
