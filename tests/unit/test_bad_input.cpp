@@ -449,6 +449,23 @@ std::vector<CliRow> cli_rows() {
            io::write_uos_pose(s / "truth" / (stem + ".pose"), pose, LengthUnit::kMetre);
          }
        }, 12, {"%S/scan00", "--unit m"}},
+      {"metres read as cm, one scan with a far return", [](auto& s) {
+         // A mine drive in metres read as cm spans 50-200 "cm" a scan; one return 300 m out made
+         // the largest scan span 300 "cm" and passed the old largest-scan test (exit 4, no overlap).
+         for (const std::string stem : {"scan000", "scan001", "scan002"}) {
+           const Scan scan = io::read_uos_points(s / (stem + ".3d"));
+           io::write_uos_points(s / (stem + ".3d"), scan, LengthUnit::kMetre);
+           const Pose pose = euler_to_pose(io::read_uos_pose(s / (stem + ".pose")));
+           io::write_uos_pose(s / (stem + ".pose"), pose, LengthUnit::kMetre);
+           io::write_uos_pose(s / "truth" / (stem + ".pose"), pose, LengthUnit::kMetre);
+         }
+         write_text(s / "scan000.3d", test::read_text(s / "scan000.3d") + "300 0 2\n");
+       }, 12, {"the median scan spans only", "--unit m"}},
+      {"a scan whose points are all identical", [](auto& s) {
+         std::string text;
+         for (int i = 0; i < 200; ++i) text += "100 20 300\n";
+         write_text(s / "scan001.3d", text);
+       }, 9, {"%S/scan001.3d:", "all 200 points are identical"}},
       {"scans with no overlap", [](auto& s) {
          const EulerPose pose = io::read_uos_pose(s / "scan002.pose");
          Pose far = euler_to_pose(pose);
@@ -529,6 +546,69 @@ TEST(BadInput, NoOverlapIsReportedPerScanAndMetresMapWithUnitM) {
   ASSERT_EQ(report["scans"].size(), 3u);
   EXPECT_EQ(report["scans"][2]["name"], "scan002");
   EXPECT_EQ(report["scans"][2]["registered"], false) << report["scans"][2].dump();
+}
+
+TEST(BadInput, AnOutputFolderThatCannotBeUsedIsRefusedBeforeMapping) {
+  TempDir dir("minemap-bad-input");
+  const fs::path survey = dir / "survey";
+  fs::copy(simulated_survey(), survey, fs::copy_options::recursive);
+  const std::vector<std::string> before = folder_names(survey);
+  std::string output;
+  // --out is the survey folder: refused, the survey untouched (no map.ply to be read as a scan).
+  EXPECT_EQ(test::run_cli("map " + survey.string() + " --out " + survey.string() + " --backend cpu", &output), 5)
+      << output;
+  EXPECT_NE(output.find("is the survey folder"), std::string::npos) << output;
+  EXPECT_EQ(folder_names(survey), before);
+  // A file, or a folder under a file: exit 5 and a sentence, not the "bug" code and a raw
+  // filesystem_error.
+  write_text(dir / "a-file", "x");
+  EXPECT_EQ(test::run_cli("map " + survey.string() + " --out " + (dir / "a-file").string(), &output), 5) << output;
+  EXPECT_NE(output.find("is a file, not a folder"), std::string::npos) << output;
+  EXPECT_EQ(test::run_cli("map " + survey.string() + " --out " + (dir / "a-file" / "out").string(), &output), 5)
+      << output;
+  EXPECT_NE(output.find("which is a file, not a folder"), std::string::npos) << output;
+  EXPECT_EQ(output.find("filesystem error"), std::string::npos) << output;
+}
+
+TEST(BadInput, AnOutputFolderHoldsThisRunsScansOnly) {
+  TempDir dir("minemap-bad-input");
+  const fs::path survey = dir / "survey";
+  fs::copy(simulated_survey(), survey, fs::copy_options::recursive);
+  const fs::path out = dir / "out";
+  std::string output;
+  ASSERT_EQ(test::run_cli("map " + survey.string() + " --out " + out.string() + " --backend cpu --quiet", &output), 0)
+      << output;
+  ASSERT_TRUE(fs::exists(out / "scan002.pose"));
+  write_text(out / "notes.txt", "mine");
+  for (const char* ext : {".3d", ".pose"}) fs::remove(survey / (std::string("scan002") + ext));
+  fs::remove(survey / "truth" / "scan002.pose");
+  ASSERT_EQ(test::run_cli("map " + survey.string() + " --out " + out.string() + " --backend cpu --quiet", &output), 0)
+      << output;
+  // The earlier run's scan002 files are gone (3DTK's show would load them); nothing else is touched.
+  EXPECT_FALSE(fs::exists(out / "scan002.pose"));
+  EXPECT_FALSE(fs::exists(out / "scan002.frames"));
+  EXPECT_TRUE(fs::exists(out / "scan001.frames"));
+  EXPECT_EQ(test::read_text(out / "notes.txt"), "mine");
+}
+
+TEST(BadInput, AMistypedWordIsNamedWithTheNearestRealOne) {
+  TempDir dir("minemap-bad-input");
+  const std::string survey = simulated_survey().string(), out = (dir / "out").string();
+  struct Case {
+    std::string args, expected;
+  };
+  for (const Case& c : std::vector<Case>{
+           {"mapp " + survey + " --out " + out, "unknown command 'mapp': did you mean 'map'?"},
+           {"map " + survey + " --out " + out + " --max-pair-dist 50",
+            "unknown option --max-pair-dist for map: did you mean --max-pair-dist-cm?"},
+           {"map " + survey + " --ou\u021b " + out, "did you mean --out?"},
+           {"export " + out + " --too x.ply", "unknown option --too for export: did you mean --to?"},
+       }) {
+    std::string output;
+    EXPECT_EQ(test::run_cli(c.args, &output), 2) << c.args << "\n" << output;
+    EXPECT_NE(output.find(c.expected), std::string::npos) << c.args << "\n" << output;
+  }
+  EXPECT_FALSE(fs::exists(dir / "out"));
 }
 
 }  // namespace

@@ -139,6 +139,10 @@ struct Hooks {
 /// previous ones before returning. Not reentrant (the signal count is process-wide).
 int run(const std::vector<std::string>& args, const Hooks& hooks = {});
 
+/// Refuses (OutputError, exit 5) an output folder that is the survey folder, a file, under a file,
+/// or in a folder that cannot be written; touches nothing.
+void check_output_folder(const std::filesystem::path& out, const std::filesystem::path& survey);
+
 /// Reads options.survey, makes the backend and maps the survey: what `minemap map` does before it
 /// writes. Throws InputError on bad input (nothing written), std::invalid_argument on bad settings.
 MapRun run_map_command(const MapCommand& command, const ProgressCallback& progress = {},

@@ -282,6 +282,7 @@ int run_watch(const MapCommand& command, const WatchOptions& watch, const std::s
     throw InputError(FileLocation{command.options.survey.string()},
                      "watch reads uos, PCD, PLY and KITTI folders; map LAS/LAZ and E57 surveys with `map`");
   }
+  check_output_folder(command.options.out, command.options.survey);
   return Watch(command, watch, options_text, hooks).run();
 }
 

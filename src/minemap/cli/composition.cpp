@@ -1,14 +1,19 @@
 // The composition root of `map` and `watch` (cli.hpp): the options become a backend, threads, read
 // settings, a mapping and its output settings here, once, for the program and the Python package.
 #include <tbb/info.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
+#include <cstring>
+#include <filesystem>
 
 #include "minemap/cli/cli.hpp"
 #include "minemap/cli/console.hpp"
 #include "minemap/cli/map_options.hpp"
 #include "minemap/cli/signals.hpp"
+#include "minemap/core/error.hpp"
 
 namespace minemap::cli {
 
@@ -91,9 +96,36 @@ MapRun map_read_survey(const MapCommand& command, io::Survey survey, double load
   return run;
 }
 
+void check_output_folder(const std::filesystem::path& out, const std::filesystem::path& survey) {
+  namespace fs = std::filesystem;
+  std::error_code error;
+  if (fs::exists(survey, error) && fs::exists(out, error) && fs::equivalent(out, survey, error)) {
+    throw OutputError("--out " + out.string() + " is the survey folder: its outputs (map.ply, scanNNN.pose, ...) would "
+                      "overwrite the survey's own files and be read as scans by the next run; give another folder");
+  }
+  if (fs::exists(out, error) && !fs::is_directory(out, error)) {
+    throw OutputError("--out " + out.string() + " is a file, not a folder: give a folder (it is created if missing)");
+  }
+  // The nearest folder that exists must be one we can write in.
+  fs::path existing = fs::absolute(out, error);
+  while (!existing.empty() && !fs::exists(existing, error) && existing != existing.parent_path()) {
+    existing = existing.parent_path();
+  }
+  if (!fs::is_directory(existing, error)) {
+    throw OutputError("--out " + out.string() + " lies under " + existing.string() +
+                      ", which is a file, not a folder: give a folder that can be created");
+  }
+  if (::access(existing.c_str(), W_OK | X_OK) != 0) {
+    throw OutputError("--out " + out.string() + ": cannot write in " + existing.string() + " (" + std::strerror(errno) +
+                      "): give a folder you can write to");
+  }
+}
+
 MapRun run_map_command(const MapCommand& command, const ProgressCallback& progress,
                        const StopRequested& stop_requested) {
-  // Read everything before touching the output folder: bad input leaves it as it was.
+  // Read everything before touching the output folder: bad input leaves it as it was. Whether it
+  // can be written is asked first, so a long run does not end in a folder it cannot use.
+  check_output_folder(command.options.out, command.options.survey);
   const auto start = std::chrono::steady_clock::now();
   io::Survey survey = io::read_survey(command.options.survey, survey_read_settings(command.options));
   const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -227,10 +227,11 @@ inline constexpr double kLocalOriginGrid_cm = 10000.0;
 
 /// The fewest points a survey's scan may have (Horn's closed form needs three points).
 inline constexpr std::size_t kMinScanPoints = 3;
-/// The units check (read_survey): with the unit left to uos' default (cm), a survey whose every
-/// scan of at least kUnitCheckMinPoints points spans less than this diagonal is refused as
-/// suspicious (metres read as cm); an explicit ReadSettings::unit skips the check.
-inline constexpr double kSuspiciousScanDiagonal_cm = 100.0;
+/// The units check (read_survey): with the unit left to uos' default (cm), a survey whose median
+/// scan (of those with at least kUnitCheckMinPoints points) spans less than this diagonal, 5 m, is
+/// refused as suspicious (metres read as cm: a mine drive's scans then span 50-200 "cm"; real scans
+/// in cm span tens of metres); an explicit ReadSettings::unit skips the check.
+inline constexpr double kSuspiciousScanDiagonal_cm = 500.0;
 inline constexpr std::size_t kUnitCheckMinPoints = 100;
 
 /// Detects the format and reads every scan. Layouts:

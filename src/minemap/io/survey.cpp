@@ -357,12 +357,12 @@ void check_duplicate_scans(const std::vector<Scan>& scans) {
   }
 }
 
-/// The units check (formats.hpp, kSuspiciousScanDiagonal_cm): only for the uos default unit.
-void check_units(const std::vector<Scan>& scans) {
-  std::vector<double> diagonals_cm(scans.size(), -1.0);  // -1: too few points to judge
+/// Each scan's bounding-box diagonal (cm), in parallel.
+std::vector<double> scan_diagonals_cm(const std::vector<Scan>& scans) {
+  std::vector<double> diagonals_cm(scans.size(), 0.0);
   tbb::parallel_for(std::size_t{0}, scans.size(), [&](std::size_t i) {
     const Scan& scan = scans[i];
-    if (scan.size() < kUnitCheckMinPoints) return;
+    if (scan.points_cm.empty()) return;
     Eigen::Vector3f lo = scan.points_cm.front(), hi = scan.points_cm.front();
     for (const Eigen::Vector3f& p : scan.points_cm) {
       lo = lo.cwiseMin(p);
@@ -370,25 +370,42 @@ void check_units(const std::vector<Scan>& scans) {
     }
     diagonals_cm[i] = (hi - lo).cast<double>().norm();
   });
-  const Scan* largest = nullptr;
-  double largest_diagonal_cm = 0.0;
+  return diagonals_cm;
+}
+
+/// A scan whose points all coincide has no shape to match (a sensor that returned one range, a
+/// writer that repeated a point): named here rather than left to fail as "no overlap".
+void check_degenerate_scans(const std::vector<Scan>& scans, const std::vector<double>& diagonals_cm) {
   for (std::size_t i = 0; i < scans.size(); ++i) {
-    const Scan& scan = scans[i];
-    const double diagonal_cm = diagonals_cm[i];
-    if (diagonal_cm < 0.0) continue;
-    if (largest == nullptr || diagonal_cm > largest_diagonal_cm) {
-      largest = &scan;
-      largest_diagonal_cm = diagonal_cm;
-    }
+    if (diagonals_cm[i] > 0.0) continue;
+    detail::fail_in_file(file_of(scans[i]),
+                         "all " + std::to_string(scans[i].size()) +
+                             " points are identical: no shape to register (remove the scan, or check its writer)",
+                         InputProblem::kEmpty);
   }
-  if (largest == nullptr || largest_diagonal_cm >= kSuspiciousScanDiagonal_cm) return;
-  char extent[64];
-  std::snprintf(extent, sizeof extent, "%.3g cm", largest_diagonal_cm);
-  detail::fail_in_file(file_of(*largest),
-                       std::string("spans only ") + extent + " (bounding-box diagonal of " +
-                           std::to_string(largest->size()) +
-                           " points) read in cm, uos' default unit, and no scan of the survey spans more: is it in "
-                           "metres? Map it with --unit m (or --unit cm if it really is this small)",
+}
+
+/// The units check (formats.hpp, kSuspiciousScanDiagonal_cm): only for the uos default unit. The
+/// median scan is judged, not the largest: one scan seeing 80 m down a drive, read as cm, still
+/// spans 80 "cm", and one stray far point must not make a metres survey pass.
+void check_units(const std::vector<Scan>& scans, const std::vector<double>& diagonals_cm) {
+  std::vector<std::size_t> judged;
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    if (scans[i].size() >= kUnitCheckMinPoints) judged.push_back(i);
+  }
+  if (judged.empty()) return;
+  std::sort(judged.begin(), judged.end(), [&](std::size_t a, std::size_t b) {
+    return diagonals_cm[a] < diagonals_cm[b] || (diagonals_cm[a] == diagonals_cm[b] && a < b);
+  });
+  const std::size_t median = judged[(judged.size() - 1) / 2];
+  if (diagonals_cm[median] >= kSuspiciousScanDiagonal_cm) return;
+  char extent[96];
+  std::snprintf(extent, sizeof extent, "%.3g cm (the largest of the %zu scans: %.3g cm)", diagonals_cm[median],
+                judged.size(), diagonals_cm[judged.back()]);
+  detail::fail_in_file(file_of(scans[median]),
+                       std::string("the median scan spans only ") + extent +
+                           ", read in cm, uos' default unit: a survey's scans span metres. Is it in metres? Map it "
+                           "with --unit m (or --unit cm if it really is this small)",
                        InputProblem::kSuspiciousUnits);
 }
 
@@ -635,7 +652,9 @@ Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
   // The survey as a whole, now that every file parsed.
   check_scan_sizes(survey.scans);
   check_duplicate_scans(survey.scans);
-  if (!read.unit && survey.unit == LengthUnit::kCentimetre) check_units(survey.scans);
+  const std::vector<double> diagonals_cm = scan_diagonals_cm(survey.scans);
+  check_degenerate_scans(survey.scans, diagonals_cm);
+  if (!read.unit && survey.unit == LengthUnit::kCentimetre) check_units(survey.scans, diagonals_cm);
   std::sort(numbers.begin(), numbers.end());
   if (const std::string gaps = describe_gaps(numbers, name_of); !gaps.empty()) {
     survey.warnings.push_back("the scan numbering has gaps: no " + gaps +

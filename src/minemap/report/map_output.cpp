@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <fstream>
+#include <set>
 #include <nlohmann/json.hpp>
 
 #include "minemap/core/atomic_file.hpp"
@@ -262,6 +264,35 @@ void write_map_ply(const std::filesystem::path& path, const PersonView& view, co
   ply.finish();
 }
 
+/// The scans an earlier run wrote to `out_dir` (its report.json), or none: read before this run
+/// overwrites it, so that run's .pose/.frames files can be told from this one's.
+std::vector<std::string> earlier_scan_names(const std::filesystem::path& out_dir) {
+  std::vector<std::string> names;
+  std::ifstream in(out_dir / "report.json");
+  if (!in) return names;
+  const nlohmann::json report = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  if (!report.is_object() || !report.contains("scans") || !report["scans"].is_array()) return names;
+  for (const auto& scan : report["scans"]) {
+    if (scan.is_object() && scan.contains("name") && scan["name"].is_string()) names.push_back(scan["name"]);
+  }
+  return names;
+}
+
+/// Removes the .pose/.frames files an earlier run wrote for scans this run does not have (a 64-scan
+/// map's scan063.pose beside a 6-scan survey's outputs would be loaded by 3DTK's `show`). Only
+/// names the earlier report.json lists are touched: nothing minemap did not write.
+void remove_earlier_scan_files(const std::filesystem::path& out_dir, const std::vector<std::string>& earlier,
+                               const MappingResult& result) {
+  std::set<std::string> current;
+  for (const ScanOutcome& scan : result.scans) current.insert(scan.name);
+  for (const std::string& name : earlier) {
+    if (current.count(name) != 0 || name.find('/') != std::string::npos || name.empty()) continue;
+    std::error_code ignored;
+    std::filesystem::remove(out_dir / (name + ".pose"), ignored);
+    std::filesystem::remove(out_dir / (name + ".frames"), ignored);
+  }
+}
+
 }  // namespace
 
 std::string write_map_outputs(const std::filesystem::path& out_dir, const MappingResult& result,
@@ -270,6 +301,7 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
                               const MapOutputSettings& output) {
   const auto start = std::chrono::steady_clock::now();
   std::filesystem::create_directories(out_dir);
+  const std::vector<std::string> earlier = earlier_scan_names(out_dir);
   // 3DTK's own files stay in the survey's frame and unit, for 3DTK's tools. Files that do not depend
   // on each other are written in parallel (each one atomically); the first failure propagates as it
   // would from a serial loop.
@@ -303,6 +335,7 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
   const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const std::string text = map_report(result, truth, settings, output, write_s);
   write_file_atomically(out_dir / "report.json", text);
+  remove_earlier_scan_files(out_dir, earlier, result);
   return text;
 }
 
