@@ -89,6 +89,15 @@ enum class PcdEncoding { kAscii, kBinary, kBinaryCompressed };
 Scan read_pcd(const fs::path& path, const ReadSettings& settings = {});
 void write_pcd(const fs::path& path, const Scan& scan, PcdEncoding encoding, LengthUnit unit = LengthUnit::kMetre);
 
+// ---- ASCII xyz (.xyz, .asc, .txt: CloudCompare's and PDAL's text export; xyz.cpp) ---------------
+
+/// x y z in metres (right-handed, z up) and optional intensity and colour columns, named by a
+/// header line or told by their count (xyz.cpp says how).
+Scan read_xyz(const fs::path& path, const ReadSettings& settings = {});
+/// Whether a .txt file holds points: its first line names x y z or starts with three numbers (a
+/// survey folder's README.txt does not).
+bool looks_like_xyz_text(const fs::path& path);
+
 // ---- PLY (ascii, binary_little_endian), vertices x y z --------------------------------------------
 
 Scan read_ply(const fs::path& path, const ReadSettings& settings = {});
@@ -193,7 +202,7 @@ struct SurveyReadSettings {
 
 /// A survey loaded from a folder.
 struct Survey {
-  std::string format;  ///< "uos", "pcd", "ply", "kitti"; "las", "laz", "e57" (set_foreign_survey_reader)
+  std::string format;  ///< "uos", "pcd", "ply", "xyz", "kitti"; "las", "laz", "e57" (set_foreign_survey_reader)
   LengthUnit unit = LengthUnit::kCentimetre;  ///< the unit the files were read in (outputs use it)
   std::vector<Scan> scans;                    ///< in natural order of names (full2 before full10); pose_cm = initial guess
   std::optional<std::vector<Pose>> truth_cm;  ///< reference T_world_file per scan, where present

@@ -72,6 +72,7 @@ struct FolderContent {
   std::map<std::uint64_t, fs::path> uos;  ///< by scan number
   std::vector<fs::path> pcd;
   std::vector<fs::path> ply;
+  std::vector<fs::path> xyz;             ///< .xyz, .asc, and .txt files that hold points
   std::vector<fs::path> kitti_bin;       ///< NNNNNN.bin: x y z intensity
   std::vector<fs::path> kitti_xyz_dirs;  ///< NNNNNN/points.bin: x y z
 };
@@ -106,8 +107,15 @@ bool natural_less(const std::string& a, const std::string& b) {
 
 FolderContent list_folder(const fs::path& dir) {
   std::error_code error;
+  if (fs::is_regular_file(dir, error)) {
+    detail::fail_in_file(dir.string(),
+                         "is a file, not a folder: minemap maps a folder of scans, one file each; to map this scan "
+                         "alone, put it in a folder of its own (mkdir one && cp " + dir.filename().string() +
+                             " one/)");
+  }
   if (!fs::is_directory(dir, error)) detail::fail_in_file(dir.string(), "is not a folder");
   FolderContent content;
+  std::vector<fs::path> text_files;  // .txt: points only in a folder of nothing else (README.txt is not)
   for (const auto& entry : fs::directory_iterator(dir, error)) {
     const fs::path& path = entry.path();
     const std::string file_name = path.filename().string();
@@ -128,12 +136,22 @@ FolderContent list_folder(const fs::path& dir) {
       content.pcd.push_back(path);
     } else if (path.extension() == ".ply") {
       content.ply.push_back(path);
+    } else if (path.extension() == ".xyz" || path.extension() == ".asc") {
+      content.xyz.push_back(path);
+    } else if (path.extension() == ".txt") {
+      text_files.push_back(path);
     } else if (path.extension() == ".bin" && all_digits(path.stem().string())) {
       content.kitti_bin.push_back(path);
     }
   }
   if (error) detail::fail_in_file(dir.string(), "cannot list the folder: " + error.message());
-  for (auto* list : {&content.pcd, &content.ply, &content.kitti_bin, &content.kitti_xyz_dirs}) {
+  if (content.uos.empty() && content.pcd.empty() && content.ply.empty() && content.kitti_bin.empty() &&
+      content.kitti_xyz_dirs.empty()) {
+    for (const fs::path& path : text_files) {
+      if (looks_like_xyz_text(path)) content.xyz.push_back(path);
+    }
+  }
+  for (auto* list : {&content.pcd, &content.ply, &content.xyz, &content.kitti_bin, &content.kitti_xyz_dirs}) {
     std::sort(list->begin(), list->end(), [](const fs::path& a, const fs::path& b) {
       return natural_less(a.filename().string(), b.filename().string());
     });
@@ -440,7 +458,7 @@ void keep_range(FolderContent& content, const SurveyReadSettings& settings) {
     if (in_range(k++)) uos.insert(entry);
   }
   content.uos = std::move(uos);
-  for (auto* list : {&content.pcd, &content.ply, &content.kitti_bin, &content.kitti_xyz_dirs}) {
+  for (auto* list : {&content.pcd, &content.ply, &content.xyz, &content.kitti_bin, &content.kitti_xyz_dirs}) {
     std::vector<fs::path> kept;
     for (std::size_t j = 0; j < list->size(); ++j) {
       if (in_range(j)) kept.push_back((*list)[j]);
@@ -482,17 +500,19 @@ void read_native_survey(const fs::path& dir, const SurveyReadSettings& settings,
                         std::vector<std::uint64_t>& numbers, std::string (*&name_of)(std::uint64_t)) {
   FolderContent content = list_folder(dir);
   keep_range(content, settings);
-  const int layouts = !content.uos.empty() + !content.pcd.empty() + !content.ply.empty() +
+  const int layouts = !content.uos.empty() + !content.pcd.empty() + !content.ply.empty() + !content.xyz.empty() +
                       !content.kitti_bin.empty() + !content.kitti_xyz_dirs.empty();
   if (layouts == 0) {
-    detail::fail_in_file(dir.string(), "no scans found (expected scanNNN.3d, *.pcd, *.ply, NNNNNN.bin or NNNNNN/points.bin)",
+    detail::fail_in_file(dir.string(),
+                         "no scans found (expected scanNNN.3d, *.pcd, *.ply, *.xyz / *.asc / *.txt (ASCII x y z), "
+                         "NNNNNN.bin or NNNNNN/points.bin)",
                          InputProblem::kEmpty);
   }
   if (layouts > 1) {
     detail::fail_in_file(dir.string(),
                          "holds scans of several layouts (" + std::to_string(content.uos.size()) + " .3d, " +
                              std::to_string(content.pcd.size()) + " .pcd, " + std::to_string(content.ply.size()) +
-                             " .ply, " + std::to_string(content.kitti_bin.size() + content.kitti_xyz_dirs.size()) +
+                             " .ply, " + std::to_string(content.xyz.size()) + " .xyz, " + std::to_string(content.kitti_bin.size() + content.kitti_xyz_dirs.size()) +
                              " KITTI .bin); put each survey in its own folder",
                          InputProblem::kInconsistentSurvey);
   }
@@ -516,6 +536,13 @@ void read_native_survey(const fs::path& dir, const SurveyReadSettings& settings,
     for (const fs::path& path : content.ply) {
       survey.scans.push_back(
           read_counting(path, read, dropped, [](const fs::path& p, const ReadSettings& s) { return read_ply(p, s); }));
+    }
+  } else if (!content.xyz.empty()) {
+    survey.format = "xyz";
+    survey.unit = read.unit.value_or(LengthUnit::kMetre);
+    for (const fs::path& path : content.xyz) {
+      survey.scans.push_back(
+          read_counting(path, read, dropped, [](const fs::path& p, const ReadSettings& s) { return read_xyz(p, s); }));
     }
   } else {
     survey.format = "kitti";
@@ -574,6 +601,7 @@ Scan read_scan_file(const fs::path& path, const std::string& format, const ReadS
   if (format == "uos") return read_uos_points(path, settings);
   if (format == "pcd") return read_pcd(path, settings);
   if (format == "ply") return read_ply(path, settings);
+  if (format == "xyz") return read_xyz(path, settings);
   if (format == "kitti") {
     if (path.filename() != "points.bin") return read_kitti_bin(path, settings, 4);
     Scan scan = read_kitti_bin(path, settings, 3);
@@ -610,7 +638,7 @@ std::vector<std::string> ready_scan_names(const fs::path& dir) {
     if (!fs::exists(fs::path(entry.second).replace_extension(".pose"), error)) break;
     names.push_back(entry.second.stem().string());
   }
-  for (const auto* list : {&content.pcd, &content.ply, &content.kitti_bin}) {
+  for (const auto* list : {&content.pcd, &content.ply, &content.xyz, &content.kitti_bin}) {
     for (const fs::path& path : *list) names.push_back(path.stem().string());
   }
   for (const fs::path& folder : content.kitti_xyz_dirs) names.push_back(folder.filename().string());
