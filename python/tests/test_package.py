@@ -62,6 +62,13 @@ def test_map_survey_and_python_cli_equal_the_program(small_survey, tmp_path):
     assert result.ok and result.unit == "cm" and result.format == "uos"
     assert result.report["truth"]["registered"]["mean_translation"] < result.report["truth"]["odometry"][
         "mean_translation"]
+    # The package's command line says it wrote map.laz too (it writes it beside the C++ outputs).
+    loud = subprocess.run([sys.executable, "-m", "minemap", "map", str(small_survey), "--out",
+                           str(tmp_path / "loud"), "--threads", "2"], capture_output=True, text=True)
+    assert loud.returncode == 0, loud.stderr
+    wrote = [line for line in loud.stdout.splitlines() if line.startswith("wrote ")]
+    assert wrote and "map.laz" in wrote[0], loud.stdout
+    assert (tmp_path / "loud" / "map.laz").exists()
     # Without `out` nothing is written, and the poses are the same.
     again = minemap.map_survey(small_survey, threads=1)
     assert np.array_equal(again.poses, result.poses)

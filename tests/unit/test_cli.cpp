@@ -304,6 +304,13 @@ TEST(Cli, WatchEndsAsMapOfTheSameFolderAndResumes) {
   const std::string live = (dir / "live").string();
   ASSERT_EQ(run_cli("watch " + survey + " --out " + live + " --backend cpu --scans 2", &output), 0) << output;
   EXPECT_NE(output.find("scan001: read"), std::string::npos) << output;
+  EXPECT_NE(output.find("(2 scans)"), std::string::npos) << output;
+  EXPECT_EQ(output.find("(1 scans)"), std::string::npos) << output;
+  // Resuming with another setting names it, on one line.
+  EXPECT_EQ(run_cli("watch " + survey + " --out " + live + " --backend cpu --scans 4 --voxel-cm 20", &output), 10)
+      << output;
+  EXPECT_NE(output.find("other mapping options (--voxel-cm: saved (default), given 20)"), std::string::npos)
+      << output;
   ASSERT_EQ(run_cli("watch " + survey + " --out " + live + " --backend cpu --scans 4", &output), 0) << output;
   EXPECT_NE(output.find("2 scans matched before"), std::string::npos) << output;
   EXPECT_EQ(output.find("scan001: read"), std::string::npos) << output;

@@ -131,6 +131,8 @@ struct Hooks {
   /// Polled between scans and relaxation matches, with SIGINT/SIGTERM: true stops the run there.
   std::function<bool()> stop_requested;
   ExtraOutputs extra_outputs;
+  /// The files extra_outputs writes ("map.laz"), for the run's "wrote OUT (...)" line.
+  std::vector<std::string> extra_output_names;
   ExportWriter export_writer;
 };
 

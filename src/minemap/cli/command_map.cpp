@@ -29,6 +29,7 @@ int run_map(const MapCommand& command, const Hooks& hooks) {
   MapRun run = run_map_command(
       command, [&](std::size_t done, std::size_t total, const std::string& phase) { bar(done, total, phase); },
       [&] { return signals::interrupted() || (hooks.stop_requested && hooks.stop_requested()); });
+  bar.finish();
   const MappingResult& result = run.result;
   if (!options.quiet) {
     for (const auto& note : result.notes) say(stdout, "note: %s\n", note.c_str());
@@ -45,15 +46,20 @@ int run_map(const MapCommand& command, const Hooks& hooks) {
   if (signals::interrupted()) throw signals::Interrupted{};  // arrived while writing: the outputs are complete
   print_loops(options, result);
   if (!options.quiet) {
-    say(stdout, "matched %zu scans: %d ICP iterations pairwise, %d in %d relaxation matches; %.2f s filter, "
-                "%.2f s trees, %.2f s pairwise, %.2f s relaxation\n",
-                result.scans.size(), result.step1_icp_iterations, result.step3_icp_iterations,
+    // The first pass matches each new scan against the previous one (pairwise, simultaneous) or
+    // against the metascan (incremental): name it as it ran.
+    const char* first_pass = command.settings.mode == MatchingMode::kIncremental ? "incremental" : "pairwise";
+    say(stdout, "matched %zu scans: %d ICP iterations %s, %d in %d relaxation matches; %.2f s filter, "
+                "%.2f s trees, %.2f s %s, %.2f s relaxation\n",
+                result.scans.size(), result.step1_icp_iterations, first_pass, result.step3_icp_iterations,
                 result.relaxation_matches, result.times.filter_s, result.times.tree_build_s, result.times.pairwise_s,
-                result.times.relaxation_s);
+                first_pass, result.times.relaxation_s);
     print_summary(result);
     print_truth(run);
-    say(stdout, "wrote %s (frames, poses, trajectory.tum, map.ply, report.json, top.png, side.png, map.html, "
-        "minemap.log)\n", options.out.c_str());
+    std::string extra;
+    for (const std::string& name : hooks.extra_output_names) extra += ", " + name;
+    say(stdout, "wrote %s (frames, poses, trajectory.tum, map.ply%s, report.json, top.png, side.png, map.html, "
+        "minemap.log)\n", options.out.c_str(), extra.c_str());
   }
   const int code = exit_code_of(verdict, options, result.scans.size());
   write_log(options.out, version());

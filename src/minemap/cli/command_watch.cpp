@@ -8,6 +8,8 @@
 // stops at once, leaving the last scan's outputs, and exits 130.
 #include <chrono>
 #include <cstdio>
+#include <map>
+#include <set>
 #include <thread>
 
 #include "minemap/cli/commands.hpp"
@@ -117,12 +119,43 @@ io::Survey Watch::read_scans(std::size_t first, std::size_t count) {
 }
 
 /// Resumes from what an earlier watch of this folder left in OUT/watch.json.
+/// The options two option texts ("name=value" lines, mapping_options_text) set differently, as
+/// "--voxel-cm: saved 15, given 20; --mode: saved (default), given simultaneous".
+std::string options_difference(const std::string& saved, const std::string& given) {
+  const auto parse = [](const std::string& text) {
+    std::map<std::string, std::string> values;
+    std::size_t start = 0;
+    while (start < text.size()) {
+      std::size_t end = text.find('\n', start);
+      if (end == std::string::npos) end = text.size();
+      const std::string line = text.substr(start, end - start);
+      const std::size_t equals = line.find('=');
+      if (!line.empty()) values[line.substr(0, equals)] = equals == std::string::npos ? "" : line.substr(equals + 1);
+      start = end + 1;
+    }
+    return values;
+  };
+  const auto a = parse(saved), b = parse(given);
+  std::set<std::string> names;
+  for (const auto& [name, value] : a) names.insert(name);
+  for (const auto& [name, value] : b) names.insert(name);
+  std::string out;
+  for (const std::string& name : names) {
+    const auto x = a.find(name), y = b.find(name);
+    const std::string was = x == a.end() ? "(default)" : x->second, now = y == b.end() ? "(default)" : y->second;
+    if (was == now) continue;
+    if (!out.empty()) out += "; ";
+    out += "--" + name + ": saved " + was + ", given " + now;
+  }
+  return out.empty() ? "in their order" : out;
+}
+
 void Watch::resume() {
   const WatchState state = read_watch_state(state_path_);
   if (state.options != options_text_) {
     throw InputError(FileLocation{state_path_.string()},
-                     "was written with other mapping options; resume with the same ones, or watch into another "
-                     "--out (saved:\n" + state.options + "given:\n" + options_text_ + ")",
+                     "was written with other mapping options (" + options_difference(state.options, options_text_) +
+                         "); resume with the same ones, or watch into another --out",
                      InputProblem::kInconsistentSurvey);
   }
   const std::size_t k = state.result.scans.size();
@@ -179,8 +212,9 @@ bool Watch::add_ready(const std::vector<std::string>& names) {
     write_state(so_far, false);
     if (!options_.quiet) {
       const ScanOutcome& scan = live_.scan(live_.size() - 1);
-      say(stdout, "%s: read %.2f s, matched %.2f s, outputs %.2f s (%zu scans)%s%s\n", scan.name.c_str(), read_s,
-                  scan.match_s, seconds_since(written), live_.size(), scan.health.doubtful() ? "; doubtful: " : "",
+      say(stdout, "%s: read %.2f s, matched %.2f s, outputs %.2f s (%zu scan%s)%s%s\n", scan.name.c_str(), read_s,
+                  scan.match_s, seconds_since(written), live_.size(), live_.size() == 1 ? "" : "s",
+                  scan.health.doubtful() ? "; doubtful: " : "",
                   scan.health.doubtful() ? scan.health.doubt.c_str() : "");
       std::fflush(stdout);
     }

@@ -1,5 +1,6 @@
 #include "minemap/cli/console.hpp"
 
+#include <chrono>
 #include <unistd.h>
 
 #include <algorithm>
@@ -52,23 +53,49 @@ void write_log(const fs::path& out_dir, const char* version) {
 
 ProgressBar::ProgressBar(bool enabled) : enabled_(enabled), terminal_(::isatty(STDERR_FILENO) != 0) {}
 
-ProgressBar::~ProgressBar() {
+ProgressBar::~ProgressBar() { finish(); }
+
+void ProgressBar::finish() {
   if (enabled_ && drawn_) std::fputs("\n", stderr);
+  std::fflush(stderr);
+  drawn_ = false;
+}
+
+std::string ProgressBar::pace(std::size_t done, std::size_t total) const {
+  const double elapsed_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - phase_start_).count();
+  // The first report of a phase starts its clock: the pace counts what was done after it.
+  if (done <= phase_first_done_ || elapsed_s <= 0.0) return {};
+  const double rate = static_cast<double>(done - phase_first_done_) / elapsed_s;
+  char text[64];
+  if (done >= total) {
+    std::snprintf(text, sizeof text, " (%.1f/s, %.1f s)", rate, elapsed_s);
+  } else {
+    std::snprintf(text, sizeof text, " (%.1f/s, ETA %.0f s)", rate, static_cast<double>(total - done) / rate);
+  }
+  return text;
 }
 
 void ProgressBar::operator()(std::size_t done, std::size_t total, const std::string& phase) {
   if (!enabled_ || total == 0) return;
+  if (phase != phase_) {  // a new stage: its own clock, and its own line on a terminal
+    if (drawn_) finish();
+    phase_ = phase;
+    phase_start_ = std::chrono::steady_clock::now();
+    phase_first_done_ = done;
+  }
   if (!terminal_) {
     // Scan 0 is the master: matching reports scans 2..n, the reduction only its end.
     if (phase == "filtering" && done != total) return;
-    std::fprintf(stderr, "minemap: progress: %s %zu/%zu\n", phase.c_str(), done, total);  // not logged
+    std::fprintf(stderr, "minemap: progress: %s %zu/%zu%s\n", phase.c_str(), done, total,
+                 pace(done, total).c_str());  // not logged
     std::fflush(stderr);
     return;
   }
   constexpr int kWidth = 40;
   const int filled = static_cast<int>(kWidth * done / total);
-  std::fprintf(stderr, "\r%-13s [%s%s] %zu/%zu", phase.c_str(), std::string(filled, '#').c_str(),
-               std::string(kWidth - filled, '.').c_str(), done, total);
+  std::fprintf(stderr, "\r%-13s [%s%s] %zu/%zu%-24s", phase.c_str(), std::string(filled, '#').c_str(),
+               std::string(kWidth - filled, '.').c_str(), done, total, pace(done, total).c_str());
   std::fflush(stderr);
   drawn_ = true;
 }

@@ -4,6 +4,7 @@
 // both follow (a scan not registered: 4; a doubtful match: 13 unless --accept-doubtful).
 //
 // Thread-safety: the thread running the command.
+#include <chrono>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -29,12 +30,20 @@ class ProgressBar {
   ~ProgressBar();
   ProgressBar(const ProgressBar&) = delete;
   ProgressBar& operator=(const ProgressBar&) = delete;
+  /// Draws `done` of `total` in `phase`, with the pace (per second) and an ETA from the phase's start.
   void operator()(std::size_t done, std::size_t total, const std::string& phase);
+  /// Ends the bar's line (before the run's own output on stdout), if one is drawn.
+  void finish();
 
  private:
+  std::string pace(std::size_t done, std::size_t total) const;
+
   bool enabled_;
   bool terminal_;
   bool drawn_ = false;
+  std::string phase_;
+  std::size_t phase_first_done_ = 0;
+  std::chrono::steady_clock::time_point phase_start_ = std::chrono::steady_clock::now();
 };
 
 /// The survey read (scans, order, warnings) and the backend chosen.

@@ -504,6 +504,7 @@ PYBIND11_MODULE(_core, m) {
     py::gil_scoped_release no_gil;
     cli::Hooks hooks;
     hooks.extra_outputs = extra_outputs_with_python();
+    hooks.extra_output_names = {"map.laz"};
     hooks.export_writer = export_writer_with_python();
     return cli::run(args, hooks);
   }, py::arg("args"), "Runs the command line (arguments without the program name); returns the exit code.");
