@@ -142,7 +142,7 @@ struct Hooks {
 int run(const std::vector<std::string>& args, const Hooks& hooks = {});
 
 /// Refuses (OutputError, exit 5) an output folder that is the survey folder, a file, under a file,
-/// or in a folder that cannot be written; touches nothing.
+/// or in a folder that cannot be written; touches nothing. An empty `out` (no outputs) passes.
 void check_output_folder(const std::filesystem::path& out, const std::filesystem::path& survey);
 
 /// Reads options.survey, makes the backend and maps the survey: what `minemap map` does before it

@@ -98,6 +98,7 @@ MapRun map_read_survey(const MapCommand& command, io::Survey survey, double load
 
 void check_output_folder(const std::filesystem::path& out, const std::filesystem::path& survey) {
   namespace fs = std::filesystem;
+  if (out.empty()) return;  // the library's and the package's runs without outputs
   std::error_code error;
   if (fs::exists(survey, error) && fs::exists(out, error) && fs::equivalent(out, survey, error)) {
     throw OutputError("--out " + out.string() + " is the survey folder: its outputs (map.ply, scanNNN.pose, ...) would "
