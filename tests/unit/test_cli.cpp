@@ -331,5 +331,40 @@ TEST(Cli, WatchEndsAsMapOfTheSameFolderAndResumes) {
   }
 }
 
+// KITTI has reference poses (graph.txt) and no odometry: the error row of the starts is not called
+// odometry.
+TEST(Cli, IdentityStartsAreNotCalledOdometry) {
+  TempDir dir("minemap-cli-kitti");
+  std::string output;
+  run_cli("map " + (test::shared_data_dir() / "kitti07_sequence").string() + " --out " + (dir / "out").string() +
+              " --backend cpu --accept-doubtful",
+          &output);
+  EXPECT_NE(output.find("  start      mean"), std::string::npos) << output;
+  EXPECT_NE(output.find("every scan at the identity, the survey has no odometry"), std::string::npos) << output;
+  EXPECT_EQ(output.find("  odometry   mean"), std::string::npos) << output;
+}
+
+// A pair's relative transform, as fast_gicp, Open3D and PCL write one, is a pair's reference poses:
+// the same errors as the two-pose file {identity, T}.
+TEST(Cli, APairsRelativeTransformIsItsReferencePoses) {
+  TempDir dir("minemap-cli-relative");
+  const auto data = test::shared_data_dir() / "fast_gicp_pair";
+  test::write_text(dir / "two.txt", "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n" + test::read_text(data / "relative.txt"));
+  std::string output;
+  for (const char* name : {"relative", "two"}) {
+    const std::string poses = std::string(name) == "relative" ? (data / "relative.txt").string() : (dir / "two.txt").string();
+    ASSERT_EQ(run_cli("map " + data.string() + " --out " + (dir / name).string() + " --backend cpu --quiet " +
+                          "--reference-poses " + poses,
+                      &output),
+              0)
+        << output;
+  }
+  const auto truth = [&](const char* name) {
+    return nlohmann::json::parse(test::read_text(dir / name / "report.json"))["truth"];
+  };
+  ASSERT_FALSE(truth("relative").is_null());
+  EXPECT_EQ(truth("relative"), truth("two"));
+}
+
 }  // namespace
 }  // namespace minemap

@@ -115,7 +115,12 @@ void print_truth(const MapRun& run) {
   if (!run.truth) return;
   const double unit_per_cm = 1.0 / centimetres_per(run.survey.unit);
   say(stdout, "pose error against the reference poses (relative to the first scan):\n");
-  print_errors("odometry", run.truth->odometry, unit_per_cm, to_string(run.survey.unit));
+  // A survey without odometry (KITTI, PLY, PCD without --initial-poses) starts every scan at the
+  // identity: the first row is then the error of those starts, not of an odometry.
+  bool identity_starts = true;
+  for (const ScanOutcome& scan : run.result.scans) identity_starts = identity_starts && scan.initial_pose_cm.isIdentity();
+  print_errors(identity_starts ? "start" : "odometry", run.truth->odometry, unit_per_cm, to_string(run.survey.unit));
+  if (identity_starts) say(stdout, "  (start: every scan at the identity, the survey has no odometry)\n");
   print_errors("registered", run.truth->registered, unit_per_cm, to_string(run.survey.unit));
 }
 

@@ -163,7 +163,8 @@ Pose in_3dtk_frame(const Pose& pose_cm, const ReadSettings& settings) {
   return settings.right_handed_to_3dtk ? right_handed_pose_to_3dtk(pose_cm, 1.0) : pose_cm;
 }
 
-/// One pose per scan of the survey; with a scan range (SurveyReadSettings::first_scan, max_scans),
+/// One pose per scan of the survey (a two-scan survey: also one, the second scan's relative to the
+/// first); with a scan range (SurveyReadSettings::first_scan, max_scans),
 /// the file covers the folder's scans up to the range's end, and the range's poses are returned.
 std::vector<Pose> read_pose_list(const fs::path& path, LengthUnit unit, std::size_t expected_count,
                                  const ReadSettings& settings, std::size_t first_scan = 0, bool ranged = false) {
@@ -177,6 +178,10 @@ std::vector<Pose> read_pose_list(const fs::path& path, LengthUnit unit, std::siz
                              std::to_string(first_scan + expected_count),
                          InputProblem::kInconsistentSurvey);
   }
+  // A pair's one relative transform (fast_gicp's, Open3D's and PCL's registration results:
+  // T_first_second, mapping the second scan into the first's frame) is the pose list
+  // {identity, T}: the first scan is the frame.
+  if (!ranged && expected_count == 2 && poses.size() == 1) poses.insert(poses.begin(), Pose::Identity());
   if (poses.size() != expected_count) {
     detail::fail_in_file(path.string(),
                          "has " + std::to_string(poses.size()) + " poses, the survey has " +
