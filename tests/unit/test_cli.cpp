@@ -366,5 +366,35 @@ TEST(Cli, APairsRelativeTransformIsItsReferencePoses) {
   EXPECT_EQ(truth("relative"), truth("two"));
 }
 
+// The verdict must not flip on the same pose: Jinchuan's second segment is trusted at the default
+// (after the 4 m retry) and was doubtful at the README's own --max-pair-dist-cm 200 ("moved its
+// points 544 cm, 2.7 times the bound": the 8 m rung was beyond the widest retry, so none ran).
+TEST(Cli, AWideBoundOfTheUsersOwnIsRetriedAsTheDefaultIs) {
+  TempDir dir("minemap-cli-jinchuan");
+  const auto data = test::shared_data_dir() / "mine_jinchuan_pcr";
+  std::string output;
+  ASSERT_EQ(run_cli("map " + data.string() + " --out " + (dir / "default").string() + " --backend cpu --quiet", &output),
+            0)
+      << output;
+  ASSERT_EQ(run_cli("map " + data.string() + " --out " + (dir / "wide").string() +
+                        " --backend cpu --quiet --max-pair-dist-cm 200",
+                    &output),
+            0)
+      << output;
+  const auto second = [&](const char* name) {
+    return nlohmann::json::parse(test::read_text(dir / name / "report.json"))["scans"][1];
+  };
+  EXPECT_EQ(second("wide")["health"]["retry_bound"], 4.0);
+  Pose a, b;
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      a(r, c) = second("default")["pose"][r][c].get<double>();
+      b(r, c) = second("wide")["pose"][r][c].get<double>();
+    }
+  }
+  EXPECT_LT((a.block<3, 1>(0, 3) - b.block<3, 1>(0, 3)).norm(), 0.02) << "metres";
+  EXPECT_LT(rotation_angle_deg(rigid_inverse(a) * b), 0.2);
+}
+
 }  // namespace
 }  // namespace minemap

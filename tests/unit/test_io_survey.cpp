@@ -236,9 +236,18 @@ TEST(Survey, PoseFilesMayUseCommasAndReferencePosesWorkForAnySurvey) {
   }
   std::size_t fourth_line_end = 0;
   for (int line = 0; line < 4; ++line) fourth_line_end = csv.find('\n', fourth_line_end) + 1;
-  write_text(poses / "short.csv", csv.substr(0, fourth_line_end));  // one matrix for two scans
+  // One matrix for two scans: a pair's relative transform (the second scan in the first's frame),
+  // as fast_gicp's relative.txt, so the reference poses are {identity, that matrix}.
+  write_text(poses / "short.csv", csv.substr(0, fourth_line_end));
   settings.reference_poses = poses / "short.csv";
-  expect_input_error([&] { io::read_survey(dir.path(), settings); }, {"short.csv", "has 1 poses, the survey has 2 scans"});
+  const io::Survey pair = io::read_survey(dir.path(), settings);
+  ASSERT_TRUE(pair.truth_cm.has_value());
+  EXPECT_EQ((*pair.truth_cm)[0], Pose::Identity());
+  EXPECT_LT(((*pair.truth_cm)[1] - scans[0].pose_cm).cwiseAbs().maxCoeff(), 1e-6);
+  // One pose of a trajectory (a TUM line) is not a relative transform: still the count's error.
+  write_text(poses / "short.tum", "0 1 2 3 0 0 0 1\n");
+  settings.reference_poses = poses / "short.tum";
+  expect_input_error([&] { io::read_survey(dir.path(), settings); }, {"short.tum", "has 1 poses, the survey has 2 scans"});
 }
 
 TEST(Survey, AThreeFloatBinUnderKittisNameIsRefusedForWhatItIs) {

@@ -163,7 +163,23 @@ Pose in_3dtk_frame(const Pose& pose_cm, const ReadSettings& settings) {
   return settings.right_handed_to_3dtk ? right_handed_pose_to_3dtk(pose_cm, 1.0) : pose_cm;
 }
 
-/// One pose per scan of the survey (a two-scan survey: also one, the second scan's relative to the
+/// Whether a pose file is one 4x4 matrix (4 lines of 4 values, or one of 16): a registration's
+/// relative transform, not a trajectory that lacks a pose (a TUM, KITTI or graph file of one).
+bool is_one_matrix(const fs::path& path) {
+  const std::string text = detail::read_file_bytes(path);
+  detail::LineReader reader(text, path.string());
+  std::vector<std::size_t> counts;
+  std::array<std::string_view, 17> tokens;
+  std::string_view line;
+  while (reader.next(line)) {
+    const std::string_view content = detail::strip_comment(line);
+    if (detail::is_blank(content)) continue;
+    counts.push_back(detail::split_tokens(content, tokens, /*commas=*/true));
+  }
+  return counts == std::vector<std::size_t>{4, 4, 4, 4} || counts == std::vector<std::size_t>{16};
+}
+
+/// One pose per scan of the survey (a two-scan survey: also one 4x4 matrix, the second scan's relative to the
 /// first); with a scan range (SurveyReadSettings::first_scan, max_scans),
 /// the file covers the folder's scans up to the range's end, and the range's poses are returned.
 std::vector<Pose> read_pose_list(const fs::path& path, LengthUnit unit, std::size_t expected_count,
@@ -181,7 +197,9 @@ std::vector<Pose> read_pose_list(const fs::path& path, LengthUnit unit, std::siz
   // A pair's one relative transform (fast_gicp's, Open3D's and PCL's registration results:
   // T_first_second, mapping the second scan into the first's frame) is the pose list
   // {identity, T}: the first scan is the frame.
-  if (!ranged && expected_count == 2 && poses.size() == 1) poses.insert(poses.begin(), Pose::Identity());
+  if (!ranged && expected_count == 2 && poses.size() == 1 && is_one_matrix(path)) {
+    poses.insert(poses.begin(), Pose::Identity());
+  }
   if (poses.size() != expected_count) {
     detail::fail_in_file(path.string(),
                          "has " + std::to_string(poses.size()) + " poses, the survey has " +

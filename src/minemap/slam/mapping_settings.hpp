@@ -139,7 +139,8 @@ struct MappingSettings {
   /// a start out of the 25 cm bound's reach (LiDAR without odometry) then still ends right, and
   /// a survey whose matches are all trusted pays nothing. Empty: no retries.
   std::vector<float> retry_bound_factors = {4.0f, 16.0f};
-  /// No retry starts wider than this: at tens of metres every surface pairs with some other one.
+  /// No retry starts wider than this: at tens of metres every surface pairs with some other one. A
+  /// rung beyond it is tried at it (once), so a bound of 2 m is retried at 4 m.
   float max_retry_bound_cm = 400.0f;
   LoopClosureSettings loops;
 

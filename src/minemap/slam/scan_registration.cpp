@@ -1,5 +1,6 @@
 #include "minemap/slam/scan_registration.hpp"
 
+#include <algorithm>
 #include <cstdio>
 
 namespace minemap::detail {
@@ -42,10 +43,15 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
   if (!match.first.ok()) return match;
   match.health = judge(scan, match.first.world_from_data, start, models);
   std::string tried;
+  float widest_cm = icp_.max_pair_dist_cm;
   for (const float factor : settings_.retry_bound_factors) {
     if (!match.health.doubtful()) return match;
-    const float bound = factor * icp_.max_pair_dist_cm;
-    if (bound > settings_.max_retry_bound_cm) break;
+    // Each rung is clamped to the widest retry, so a wide bound of the user's own (2 m, where the
+    // 4x rung would be 8 m) still gets the 4 m retry the default's 25 cm reaches: a match that
+    // started out of 2 m's reach and converges right is then trusted, as it is at the default.
+    const float bound = std::min(factor * icp_.max_pair_dist_cm, settings_.max_retry_bound_cm);
+    if (bound <= widest_cm) continue;
+    widest_cm = bound;
     const std::vector<WorldModel> wide_models = models_for(bound, match.first.world_from_data);
     WideMatch retry = match_from_wide_bound(scan, start, wide_models, bound);
     match.iterations += retry.iterations;
