@@ -137,3 +137,53 @@ def test_a_map_of_arrays_has_nothing_to_export(tmp_path):
     with pytest.raises(minemap.InputError, match="arrays"):
         minemap.export(tmp_path / "out", tmp_path / "x.ply")
     assert not (tmp_path / "x.ply").exists()
+
+
+def _write_ply_xyz(path: Path, xyz: np.ndarray, double: bool):
+    kind = "double" if double else "float"
+    header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(xyz)}\n"
+              f"property {kind} x\nproperty {kind} y\nproperty {kind} z\nend_header\n")
+    path.write_bytes(header.encode() + np.ascontiguousarray(xyz, dtype="<f8" if double else "<f4").tobytes())
+
+
+def test_a_utm_copy_maps_as_the_original_and_its_laz_lands_on_its_world_coordinates(tmp_path):
+    """A PLY survey and its copy moved by a UTM-size offset (whole hundreds of metres): the copy maps
+    to the original's local poses (well under 1 mm), and its LAZ export holds each point where the
+    registered pose puts its world coordinates, to the millimetre."""
+    base = tmp_path / "base"
+    run_cli("map", SHARED / "fast_gicp_pair", "--out", base, "--quiet", "--threads", 2)
+    names = [s["name"] for s in json.loads((base / "report.json").read_text())["scans"]]
+    offset = np.array([500000.0, 6000000.0, 100.0])
+    for folder in ("local", "world"):
+        (tmp_path / folder).mkdir()
+    for name in names:
+        run_cli("export", base, "--to", tmp_path / "one.ply", "--scans", name, "--quiet")
+        cols = _ply_columns(tmp_path / "one.ply")
+        xyz = np.stack([cols["x"], cols["y"], cols["z"]], axis=1).astype(np.float32).astype(np.float64)
+        _write_ply_xyz(tmp_path / "local" / f"{name}.ply", xyz, double=False)
+        _write_ply_xyz(tmp_path / "world" / f"{name}.ply", xyz + offset, double=True)
+    for folder in ("local", "world"):
+        run_cli("map", tmp_path / folder, "--out", tmp_path / f"{folder}-out", "--quiet", "--threads", 2,
+                "--accept-doubtful")
+    local = json.loads((tmp_path / "local-out" / "report.json").read_text())
+    world = json.loads((tmp_path / "world-out" / "report.json").read_text())
+    np.testing.assert_array_equal(world["origin"], offset)
+    for a, b in zip(local["scans"], world["scans"]):
+        pa, pb = np.array(a["pose"]), np.array(b["pose"])
+        assert np.linalg.norm(pa[:3, 3] - pb[:3, 3]) < 1e-3, (a["name"], pa, pb)  # metres: under 1 mm
+        assert np.abs(pa[:3, :3] - pb[:3, :3]).max() < 1e-5
+    laz = tmp_path / "world.laz"
+    done = subprocess.run([sys.executable, "-m", "minemap", "export", str(tmp_path / "world-out"), "--to", str(laz),
+                           "--quiet"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    las = laspy.read(laz)
+    got = np.stack([las.x, las.y, las.z], axis=1)
+    start = 0
+    for s, name in zip(world["scans"], names):
+        cols = _ply_columns(tmp_path / "world" / f"{name}.ply")
+        xyz = np.stack([cols["x"], cols["y"], cols["z"]], axis=1)
+        pose = np.array(s["pose"])
+        want = (xyz - offset) @ pose[:3, :3].T + pose[:3, 3] + offset
+        np.testing.assert_allclose(got[start:start + len(xyz)], want, rtol=0, atol=1e-3)
+        start += len(xyz)
+    assert start == len(got)
