@@ -168,6 +168,15 @@ TEST(MapHtml, ScanFiguresAreInTheSurveyUnit) {
   EXPECT_DOUBLE_EQ(scan["at"][0].get<double>(), 2.0);
   EXPECT_FALSE(scan["registered"].get<bool>());
   EXPECT_EQ(scan["doubt"], "too few pairs");
+  EXPECT_EQ(d.meta["scans"][0]["note"], "");
+}
+
+TEST(MapHtml, ATrustedScanSaysItNeededTheRetry) {
+  Survey s = make_survey(2, 10);
+  s.scans[1].note = "trusted after a retry from 400 cm";
+  const Decoded d = decode(map_html(s.input(), {}));
+  EXPECT_EQ(d.meta["scans"][1]["note"], "trusted after a retry from 400 cm");
+  EXPECT_EQ(d.meta["scans"][1]["doubt"], "");
 }
 
 TEST(MapHtml, DecimationCapsThePointsKeepsEveryScanAndRepeats) {

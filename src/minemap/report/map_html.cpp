@@ -431,6 +431,7 @@ constexpr std::string_view kViewerJs = R"JS(
       }
       if (!s.registered) line(info, 'div', 'not registered (pose from odometry)' + (s.doubt ? ': ' + s.doubt : ''), 'doubt');
       else if (s.doubt) line(info, 'div', 'doubtful: ' + s.doubt, 'doubt');
+      else if (s.note) line(info, 'div', s.note, 'dim');
       info.hidden = false;
       if (finite(s.p)) {
         selectedGeometry.attributes.position.setXYZ(0, s.p[0], s.p[1], s.p[2]);
@@ -580,7 +581,8 @@ std::string map_html(const MapHtmlInput& input, const MapHtmlSettings& settings)
                      {"pairs", scan.pairs},
                      {"rms", scan.rms_cm * unit_per_cm},
                      {"registered", scan.registered},
-                     {"doubt", scan.doubt}});
+                     {"doubt", scan.doubt},
+                     {"note", scan.note}});
   }
   nlohmann::json meta = {{"format", "minemap map.html 1"},
                                {"title", settings.title},

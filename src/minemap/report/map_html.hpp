@@ -49,6 +49,7 @@ struct MapHtmlScan {
   double rms_cm = 0.0;                                    ///< RMS pair distance there
   bool registered = true;                                 ///< false: the pose is the odometry's
   std::string doubt;  ///< why the match is doubtful, or why it failed when !registered; empty: neither
+  std::string note;   ///< how a trusted match got there, when not plainly ("trusted after a retry from 4 m")
 };
 
 struct MapHtmlInput {

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <fstream>
 #include <set>
 #include <nlohmann/json.hpp>
@@ -212,7 +213,16 @@ PersonView person_view(const MappingResult& result, const std::optional<std::vec
     }
     if (intensity) view.intensity.insert(view.intensity.end(), scan.used_intensity->begin(), scan.used_intensity->end());
     view.point_scans.resize(view.points_cm.size(), static_cast<std::uint32_t>(i));
-    // map.html's info box: why a registered scan's match is doubtful, or why an unregistered one failed.
+    // map.html's info box: why a registered scan's match is doubtful, or why an unregistered one
+    // failed; for a trusted one that needed a retry, from how wide.
+    std::string note;
+    if (scan.registered && !scan.health.doubtful() && scan.health.retry_bound_cm > 0.0f) {
+      char text[160];
+      std::snprintf(text, sizeof text,
+                    "trusted after a retry from %g cm: the match at the %g cm bound started out of its reach",
+                    double(scan.health.retry_bound_cm), double(scan.health.pair_bound_cm));
+      note = text;
+    }
     view.html_scans.push_back({.name = scan.name,
                                .position_cm = view.positions_cm.back(),
                                .iterations = scan.last_match.iterations(),
@@ -221,7 +231,8 @@ PersonView person_view(const MappingResult& result, const std::optional<std::vec
                                .registered = scan.registered,
                                .doubt = !scan.registered         ? scan.failure
                                         : scan.health.doubtful() ? scan.health.doubt
-                                                                 : ""});
+                                                                 : "",
+                               .note = note});
   }
   if (truth_cm && truth_cm->size() == result.scans.size()) {
     // Reference trajectory expressed in the master scan's frame, as the registered one is.
