@@ -392,6 +392,17 @@ struct CliRow {
   bool writes_outputs = false;  ///< exit 0 and 4 write the map; every other code leaves the folder
 };
 
+/// The 3-scan survey's points and poses written in metres (what a metres survey read as cm is).
+void rewrite_in_metres(const fs::path& s) {
+  for (const std::string stem : {"scan000", "scan001", "scan002"}) {
+    const Scan scan = io::read_uos_points(s / (stem + ".3d"));
+    io::write_uos_points(s / (stem + ".3d"), scan, LengthUnit::kMetre);
+    const Pose pose = euler_to_pose(io::read_uos_pose(s / (stem + ".pose")));
+    io::write_uos_pose(s / (stem + ".pose"), pose, LengthUnit::kMetre);
+    io::write_uos_pose(s / "truth" / (stem + ".pose"), pose, LengthUnit::kMetre);
+  }
+}
+
 std::vector<CliRow> cli_rows() {
   const auto remove_scan = [](const fs::path& s, const std::string& stem) {
     fs::remove(s / (stem + ".3d"));
@@ -441,24 +452,12 @@ std::vector<CliRow> cli_rows() {
          write_text(s / "b.pcd", pcd(kGood, "binary", 1'000'000'000'000));
        }, 11, {"%S/b.pcd:9:", "claims 1000000000000 points"}},
       {"metres read as cm", [](auto& s) {
-         for (const std::string stem : {"scan000", "scan001", "scan002"}) {
-           const Scan scan = io::read_uos_points(s / (stem + ".3d"));
-           io::write_uos_points(s / (stem + ".3d"), scan, LengthUnit::kMetre);
-           const Pose pose = euler_to_pose(io::read_uos_pose(s / (stem + ".pose")));
-           io::write_uos_pose(s / (stem + ".pose"), pose, LengthUnit::kMetre);
-           io::write_uos_pose(s / "truth" / (stem + ".pose"), pose, LengthUnit::kMetre);
-         }
+         rewrite_in_metres(s);
        }, 12, {"%S/scan00", "--unit m"}},
       {"metres read as cm, one scan with a far return", [](auto& s) {
          // A mine drive in metres read as cm spans 50-200 "cm" a scan; one return 300 m out made
          // the largest scan span 300 "cm" and passed the old largest-scan test (exit 4, no overlap).
-         for (const std::string stem : {"scan000", "scan001", "scan002"}) {
-           const Scan scan = io::read_uos_points(s / (stem + ".3d"));
-           io::write_uos_points(s / (stem + ".3d"), scan, LengthUnit::kMetre);
-           const Pose pose = euler_to_pose(io::read_uos_pose(s / (stem + ".pose")));
-           io::write_uos_pose(s / (stem + ".pose"), pose, LengthUnit::kMetre);
-           io::write_uos_pose(s / "truth" / (stem + ".pose"), pose, LengthUnit::kMetre);
-         }
+         rewrite_in_metres(s);
          write_text(s / "scan000.3d", test::read_text(s / "scan000.3d") + "300 0 2\n");
        }, 12, {"the median scan spans only", "--unit m"}},
       {"a scan whose points are all identical", [](auto& s) {

@@ -116,11 +116,15 @@ inline std::string_view strip_comment(std::string_view line) {
 
 inline bool is_blank(std::string_view line) { return trim(line).empty(); }
 
-/// Splits `line` at whitespace (and, with `commas`, at commas too: CSV pose files) into `out`.
+/// Splits `line` at whitespace (and, with `commas`, at commas too: CSV pose files; with
+/// `semicolons`, at those too: ASCII point exports) into `out`.
 /// Returns the number of tokens on the line, which may be more than out.size() (the extra tokens are
 /// counted but not stored), so callers can report "found N".
-inline std::size_t split_tokens(std::string_view line, std::span<std::string_view> out, bool commas = false) {
-  const auto separates = [commas](char c) { return is_space(c) || (commas && c == ','); };
+inline std::size_t split_tokens(std::string_view line, std::span<std::string_view> out, bool commas = false,
+                                bool semicolons = false) {
+  const auto separates = [commas, semicolons](char c) {
+    return is_space(c) || (commas && c == ',') || (semicolons && c == ';');
+  };
   std::size_t count = 0;
   std::size_t i = 0;
   while (i < line.size()) {

@@ -35,19 +35,9 @@ using detail::NumberStatus;
 constexpr int kMaxHeaderLines = 10;
 constexpr std::size_t kMaxColumns = 32;
 
-bool separates(char c) { return detail::is_space(c) || c == ',' || c == ';'; }
-
+/// Spaces, tabs, commas and semicolons separate the values.
 std::size_t split(std::string_view line, std::array<std::string_view, kMaxColumns>& out) {
-  std::size_t count = 0;
-  for (std::size_t i = 0; i < line.size();) {
-    while (i < line.size() && separates(line[i])) ++i;
-    if (i >= line.size()) break;
-    const std::size_t start = i;
-    while (i < line.size() && !separates(line[i])) ++i;
-    if (count < out.size()) out[count] = line.substr(start, i - start);
-    ++count;
-  }
-  return count;
+  return detail::split_tokens(line, out, /*commas=*/true, /*semicolons=*/true);
 }
 
 std::string lower(std::string_view text) {
