@@ -72,6 +72,8 @@ TEST(Names, EveryEnumParsesItsOwnNamesAndListsThemWhenNot) {
   expect_round_trips(kPresetNames, parse_preset);
   expect_round_trips(kSearchMethodNames, parse_search_method);
   expect_round_trips(kBackendNames, parse_backend);
+  expect_round_trips(kMotionModelNames, parse_motion_model);
+  expect_round_trips(kDeskewModeNames, parse_deskew_mode);
   EXPECT_EQ(parse_search_method("exact"), SearchMethod::kExact);  // the long names too
   EXPECT_EQ(parse_search_method("bruteforce"), SearchMethod::kBruteForce);
   EXPECT_EQ(name_in(kExitCodeNames, ExitCode::kDoubtfulMap), std::string("doubtful_map"));
@@ -134,6 +136,8 @@ TEST(CommandLine, EveryMappingOptionChangesTheSettings) {
       if (option.name == "--mode") args.push_back("pairwise");
       else if (option.name == "--reduction") args.push_back("slices");
       else if (option.name == "--search") args.push_back("kd");
+      else if (option.name == "--deskew") args.push_back("off");
+      else if (option.name == "--motion-model") args.push_back("constant-velocity");
       else args.push_back(perturbed(d.front() == '[' ? d.substr(1) : d));
     }
     SCOPED_TRACE(args.back());

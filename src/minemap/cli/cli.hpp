@@ -101,8 +101,9 @@ decltype(auto) with_threads(const MapOptions& options, Work&& work) {
   return arena.execute(std::forward<Work>(work));
 }
 
-/// The survey reading settings `map`'s options ask for.
-io::SurveyReadSettings survey_read_settings(const MapOptions& options);
+/// The survey reading settings `map`'s options ask for (the points' times too, for the deskew,
+/// unless `mapping` turns it off).
+io::SurveyReadSettings survey_read_settings(const MapOptions& options, const MappingSettings& mapping);
 
 /// A survey read and mapped (run_map_command).
 struct MapRun {

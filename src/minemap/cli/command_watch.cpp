@@ -96,7 +96,7 @@ class Watch {
 
 /// Scans [first, first + count) of the folder as `map` reads them (unit, poses, truth).
 io::Survey Watch::read_scans(std::size_t first, std::size_t count) {
-  io::SurveyReadSettings read = survey_read_settings(options_);
+  io::SurveyReadSettings read = survey_read_settings(options_, command_.settings);
   read.first_scan = first;
   read.max_scans = count;
   io::Survey& survey = run_.survey;

@@ -3,11 +3,13 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "minemap/cli/cli.hpp"
 #include "minemap/cli/map_options.hpp"
 #include "minemap/sim/mine_simulator.hpp"
+#include "minemap/sim/moving_lidar.hpp"
 
 namespace minemap::cli {
 
@@ -48,10 +50,19 @@ CLI::App* add_export_command(CLI::App& app, ExportOptions& options, MapOptions& 
 
 struct SimulateOptions {
   fs::path out;
-  int scans = 0;
+  int scans = 0;  ///< tilting: scans; moving sensors: sweeps (0: the whole path)
   std::uint32_t seed = sim::MineSettings{}.seed;
   double loop_m = 0.0;
-  double step_m = sim::MineSettings{}.mean_step_cm / 100.0;
+  double step_m = sim::MineSettings{}.mean_step_cm / 100.0;  ///< tilting only
+  bool step_given = false;                                    ///< --step-m was on the command line
+  /// "tilting" (the stop-and-go uos survey, the default) or a moving sensor (sim::kMovingSensorNames).
+  std::string sensor = "tilting";
+  // Moving sensors only (unset: the settings' defaults, sim::MovingSimulationSettings).
+  std::optional<double> speed_mps;
+  std::optional<double> rate_hz;
+  std::optional<int> beams;
+  std::optional<double> turn_deg_s;
+  bool odometry = false;
 };
 /// `minemap simulate` (command_simulate.cpp).
 int run_simulate(const SimulateOptions& options);

@@ -28,10 +28,13 @@ int thread_count(const MapOptions& options) {
   return options.threads > 0 ? std::min(options.threads, max_threads) : max_threads;
 }
 
-io::SurveyReadSettings survey_read_settings(const MapOptions& options) {
+io::SurveyReadSettings survey_read_settings(const MapOptions& options, const MappingSettings& mapping) {
   io::SurveyReadSettings read;
   if (!options.unit.empty()) read.read.unit = parse_length_unit(options.unit);
-  read.read.attributes = kIntensity;  // the matching reads coordinates; the 3D view colours by intensity
+  // The matching reads coordinates, and the points' times to deskew a moving sensor's sweeps; the 3D
+  // view colours by intensity.
+  read.read.attributes = kIntensity;
+  if (mapping.motion.deskew != DeskewMode::kOff) read.read.attributes = static_cast<std::uint8_t>(kIntensity | kTime);
   read.read.points_per_slice = options.points_per_slice;
   read.read.detect_slices = !options.no_slice_detection;
   read.read.right_handed_to_3dtk = options.right_handed_to_3dtk;
@@ -128,7 +131,7 @@ MapRun run_map_command(const MapCommand& command, const ProgressCallback& progre
   // can be written is asked first, so a long run does not end in a folder it cannot use.
   check_output_folder(command.options.out, command.options.survey);
   const auto start = std::chrono::steady_clock::now();
-  io::Survey survey = io::read_survey(command.options.survey, survey_read_settings(command.options));
+  io::Survey survey = io::read_survey(command.options.survey, survey_read_settings(command.options, command.settings));
   const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return map_read_survey(command, std::move(survey), load_s, progress, stop_requested);
 }

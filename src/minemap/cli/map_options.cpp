@@ -161,6 +161,11 @@ void MapOptionTable::declare_reduction(MapOptions& map, MappingSettings& mapping
        "Match against clouds reduced like the data, as the paper does (faster, less accurate)");
   number(g, "--point-stride", mapping.unstructured_point_stride, "Scans without slices: keep every n-th point");
   number(g, "--bucket-size", mapping.tree.bucket_size, "kd-tree bucket size");
+  choice(g, "--deskew", mapping.motion.deskew, kDeskewModeNames, parse_deskew_mode,
+         "auto (a moving sensor's sweeps, whose points carry times, are deskewed by the motion estimated for "
+         "them) | off");
+  number(g, "--max-sweep-s", mapping.motion.max_sweep_s,
+         "Points' times spanning more than this are not one sweep of a moving sensor (not deskewed)");
 }
 
 void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping) {
@@ -185,6 +190,14 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
        "ICP as in the paper, without Anderson acceleration (the default accelerates: fewer iterations)");
   number(g, "--acceleration-history", icp.acceleration_history, "Anderson acceleration: ICP steps it extrapolates");
   number(g, "--min-overlap-pairs", mapping.min_overlap_pairs, "Overlap threshold (pairs)");
+  number(g, "--min-overlap-fraction", mapping.min_overlap_fraction,
+         "...or this fraction of a scan's reduced points, where that is fewer (small scans)");
+  choice(g, "--motion-model", mapping.motion.model, kMotionModelNames, parse_motion_model,
+         "Where a scan starts: odometry (its pose file's step) | constant-velocity (the previous registered step "
+         "again) | auto (constant velocity where the scans carry no poses)");
+  number(g, "--adaptive-bound-sigmas", mapping.motion.adaptive_bound_sigmas,
+         "Constant velocity: the first match starts at this many RMS prediction errors when wider than the pair "
+         "bound (0 = off)");
   number(g, "--metascan-margin-cm", mapping.metascan_margin_cm,
          "Metascan: model points within the scan's box grown by the pair bound and this");
 }

@@ -73,6 +73,50 @@ double rotation_angle_deg(const Pose& pose) {
   return std::acos(cos_angle) * kDegPerRad;
 }
 
+namespace {
+
+Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
+  return m;
+}
+
+/// SE(3)'s left Jacobian V(omega): t = V * rho. Series near zero, where the closed form cancels.
+Eigen::Matrix3d left_jacobian(const Eigen::Vector3d& omega) {
+  const double theta = omega.norm();
+  const Eigen::Matrix3d w = skew(omega);
+  if (theta < 1e-5) return Eigen::Matrix3d::Identity() + 0.5 * w + (1.0 / 6.0) * w * w;
+  const double t2 = theta * theta;
+  return Eigen::Matrix3d::Identity() + (1.0 - std::cos(theta)) / t2 * w + (theta - std::sin(theta)) / (t2 * theta) * w * w;
+}
+
+}  // namespace
+
+Twist se3_log(const Pose& pose) {
+  const Eigen::AngleAxisd angle_axis(Eigen::Matrix3d(pose.block<3, 3>(0, 0)));
+  const Eigen::Vector3d omega = angle_axis.angle() * angle_axis.axis();
+  Twist twist;
+  twist.head<3>() = omega;
+  twist.tail<3>() = left_jacobian(omega).inverse() * pose.block<3, 1>(0, 3);
+  return twist;
+}
+
+Pose se3_exp(const Twist& twist) {
+  const Eigen::Vector3d omega = twist.head<3>();
+  Pose pose = Pose::Identity();
+  const double theta = omega.norm();
+  pose.block<3, 3>(0, 0) = theta > 0.0 ? Eigen::AngleAxisd(theta, omega / theta).toRotationMatrix()
+                                       : Eigen::Matrix3d::Identity();
+  pose.block<3, 1>(0, 3) = left_jacobian(omega) * twist.tail<3>();
+  return pose;
+}
+
+Pose motion_fraction(const Pose& step, double fraction) {
+  if (fraction == 1.0) return step;
+  if (fraction == 0.0) return Pose::Identity();
+  return se3_exp(fraction * se3_log(step));
+}
+
 Pose orthonormalised(const Pose& pose) {
   Eigen::JacobiSVD<Eigen::Matrix3d> svd(pose.block<3, 3>(0, 0), Eigen::ComputeFullU | Eigen::ComputeFullV);
   Eigen::Matrix3d r = svd.matrixU() * svd.matrixV().transpose();

@@ -32,6 +32,17 @@ double rotation_angle_deg(const Pose& pose);
 /// Translation length of a rigid transform, in the pose's unit (cm inside minemap).
 inline double translation_norm(const Pose& pose) { return pose.block<3, 1>(0, 3).norm(); }
 
+/// A rigid motion as a twist (rotation vector in radians, then translation in the pose's unit),
+/// SE(3)'s logarithm: exp(log(T)) = T. For rotation angles below pi.
+using Twist = Eigen::Matrix<double, 6, 1>;
+Twist se3_log(const Pose& pose);
+Pose se3_exp(const Twist& twist);
+
+/// The part `fraction` of a motion at constant velocity in its own frame: exp(fraction * log(T))
+/// (0: the identity, 1: T, -0.5: half of it backwards). A vehicle turning at a constant rate moves
+/// along exactly this screw; the motion model and the deskew take their fractions of a step here.
+Pose motion_fraction(const Pose& step, double fraction);
+
 /// Re-orthonormalises the rotation part (polar decomposition through SVD) so that accumulated
 /// float or text round-off never yields a non-rotation.
 Pose orthonormalised(const Pose& pose);

@@ -607,7 +607,7 @@ PYBIND11_MODULE(_core, m) {
     io::Survey survey;
     {
       py::gil_scoped_release no_gil;
-      survey = io::read_survey(path, cli::survey_read_settings(command.options));
+      survey = io::read_survey(path, cli::survey_read_settings(command.options, command.settings));
     }
     return survey_to_dict(survey);
   }, py::arg("path"), py::arg("args"));

@@ -1,5 +1,7 @@
 #include "minemap/report/map_output.hpp"
 
+#include <cmath>
+
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
@@ -123,6 +125,8 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                      {"points_used", s.points_used},
                      {"outliers_replaced", s.outliers_replaced}});
     if (i < output.sources.size()) scans.back()["source"] = output.sources[i];
+    if (std::isfinite(s.stamp_s)) scans.back()["stamp_s"] = s.stamp_s;
+    if (s.sweep_motion_cm) scans.back()["sweep_motion"] = pose_json(*s.sweep_motion_cm, unit_per_cm);
     if (s.health.judged) {
       const RegistrationHealth& h = s.health;
       scans.back()["health"] = {{"trusted", !h.doubtful()},

@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <fstream>
 #include <nlohmann/json.hpp>
+
+#include <limits>
+
+#include "minemap/filter/deskew.hpp"
 #include <set>
 
 #include "minemap/core/error.hpp"
@@ -96,7 +100,8 @@ SurveyExport::SurveyExport(const std::filesystem::path& out_dir, ExportSettings 
     }
     plan_.push_back({static_cast<std::uint32_t>(i), name, field(scan, "source", report_path_).get<std::string>(),
                      pose_of(field(scan, "pose", report_path_), cm, report_path_),
-                     field(scan, "points_in", report_path_).get<std::uint64_t>()});
+                     field(scan, "points_in", report_path_).get<std::uint64_t>(), std::nullopt});
+    if (scan.contains("sweep_motion")) plan_.back().sweep_motion_cm = pose_of(scan["sweep_motion"], cm, report_path_);
   }
   for (const std::string& name : settings_.scans) {
     if (!found.count(name)) fail(report_path_, "holds no scan " + name + " (--scans)", InputProblem::kInconsistentSurvey);
@@ -144,10 +149,16 @@ ExportedScan SurveyExport::read(const Planned& planned) const {
   out.name = planned.name;
   out.source = planned.source;
   out.points.resize(scan.size());
-  // The pose maps the files' frame moved by -origin (io::Survey::origin_cm) into the local world.
+  // The pose maps the files' frame moved by -origin (io::Survey::origin_cm) into the local world;
+  // a sweep the map deskewed is deskewed here too, in that frame, as the map did.
+  scan.local_origin_cm -= origin_cm_;
+  if (planned.sweep_motion_cm) {
+    const SweepTiming timing = sweep_timing(scan, std::numeric_limits<double>::infinity());
+    scan.points_cm = deskewed_points(scan, timing, *planned.sweep_motion_cm);
+  }
   const Eigen::Matrix3d r = planned.pose_cm.block<3, 3>(0, 0);
   const Eigen::Vector3d t = planned.pose_cm.block<3, 1>(0, 3);
-  for (std::size_t i = 0; i < scan.size(); ++i) out.points[i] = place(r * (scan.file_point(i) - origin_cm_) + t);
+  for (std::size_t i = 0; i < scan.size(); ++i) out.points[i] = place(r * scan.file_point(i) + t);
   out.attributes = std::move(scan.attributes);
   if (settings_.voxel_cm > 0.0) {
     const double voxel = settings_.voxel_cm / centimetres_per(unit());

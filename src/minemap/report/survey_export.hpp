@@ -78,6 +78,8 @@ class SurveyExport {
     std::string name, source;
     Pose pose_cm;  ///< T_world_file, survey frame, cm
     std::uint64_t points_in;
+    /// The motion the map deskewed the sweep by (report.json's sweep_motion; filter/deskew.hpp).
+    std::optional<Pose> sweep_motion_cm;
   };
   Eigen::Vector3d place(const Eigen::Vector3d& world_cm) const;
   ExportedScan read(const Planned& scan) const;

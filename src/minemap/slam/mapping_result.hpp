@@ -4,7 +4,9 @@
 // (SurveyMatcher::result), never the state itself.
 //
 // Thread-safety: plain values.
+#include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -36,6 +38,11 @@ struct ScanOutcome {
   /// Their intensities, where the scan carries them (kVoxel: each voxel's mean); null otherwise.
   std::shared_ptr<const std::vector<float>> used_intensity;
   Pose world_from_points = Pose::Identity();    ///< final T_world_points (places used_points_cm)
+  /// A moving sensor's sweep: its middle on the file's clock (NaN: its points carry no times)...
+  double stamp_s = std::numeric_limits<double>::quiet_NaN();
+  /// ...and the motion its points were deskewed by (filter/deskew.hpp: over the whole sweep, start
+  /// to end, in the file's frame, cm); empty: not deskewed.
+  std::optional<Pose> sweep_motion_cm;
   bool registered = true;                   ///< false: no registration succeeded; pose from odometry
   std::string failure;                      ///< why, when !registered
 };

@@ -12,6 +12,8 @@ const char* to_string(Reduction reduction) { return name_in(kReductionNames, red
 Reduction parse_reduction(const std::string& text) { return parse_named(kReductionNames, text, "reduction"); }
 const char* to_string(Preset preset) { return name_in(kPresetNames, preset); }
 Preset parse_preset(const std::string& text) { return parse_named(kPresetNames, text, "preset"); }
+const char* to_string(MotionModel model) { return name_in(kMotionModelNames, model); }
+MotionModel parse_motion_model(const std::string& text) { return parse_named(kMotionModelNames, text, "motion model"); }
 
 IcpSettings MappingSettings::default_icp() {
   IcpSettings icp;
@@ -64,6 +66,13 @@ IcpSettings MappingSettings::pairwise_icp() const {
   return pairwise;
 }
 
+int MappingSettings::min_pairs_for(std::size_t data_points) const {
+  const int pairwise = pairwise_icp().termination.min_pairs;
+  const double scaled = std::ceil(min_overlap_fraction * static_cast<double>(data_points));
+  if (scaled >= pairwise) return pairwise;
+  return std::max(3, static_cast<int>(scaled));
+}
+
 IcpSettings MappingSettings::relaxation_icp() const {
   IcpSettings relaxation = pairwise_icp();
   if (relaxation_min_step_cm > 0.0) relaxation.termination.min_translation_step_cm = relaxation_min_step_cm;
@@ -99,7 +108,11 @@ void MappingSettings::validate() const {
     if (!(factor > 1.0f) || !std::isfinite(factor)) throw std::invalid_argument("retry bound factors must be > 1");
   }
   if (!(max_retry_bound_cm > 0.0f)) throw std::invalid_argument("the widest retry bound must be > 0 cm");
+  if (!(min_overlap_fraction >= 0.0) || !(min_overlap_fraction <= 1.0)) {
+    throw std::invalid_argument("the overlap fraction must be in [0, 1]");
+  }
   loops.validate();
+  motion.validate();
   health.validate();
   if (reduction == Reduction::kVoxel && (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm))) {
     throw std::invalid_argument("the voxel size must be a finite length > 0 cm");
@@ -110,6 +123,14 @@ void MappingSettings::validate() const {
   if (!(metascan_margin_cm >= 0.0) || !std::isfinite(metascan_margin_cm)) {
     throw std::invalid_argument("the metascan margin must be a finite length >= 0 cm");
   }
+}
+
+void MotionSettings::validate() const {
+  if (!(adaptive_bound_sigmas >= 0.0) || !std::isfinite(adaptive_bound_sigmas)) {
+    throw std::invalid_argument("the adaptive bound's sigmas must be finite and >= 0");
+  }
+  if (adaptive_bound_window < 1) throw std::invalid_argument("the adaptive bound's window must be >= 1 scan");
+  if (!(max_sweep_s > 0.0)) throw std::invalid_argument("the longest sweep must be > 0 s");
 }
 
 void LoopClosureSettings::validate() const {

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "minemap/core/name_table.hpp"
+#include "minemap/filter/deskew.hpp"
 #include "minemap/filter/slice_filter.hpp"
 #include "minemap/registration/health.hpp"
 #include "minemap/registration/icp.hpp"
@@ -46,6 +47,61 @@ inline constexpr std::array<EnumName<Preset>, 3> kPresetNames{
     {{Preset::kDefault, "default"}, {Preset::kSimultaneous, "simultaneous"}, {Preset::kPaper, "paper"}}};
 const char* to_string(Preset preset);
 Preset parse_preset(const std::string& text);  ///< a name of kPresetNames
+
+/// Where a scan's match starts (slam/motion_model.hpp).
+enum class MotionModel {
+  /// kOdometry where the scans carry odometry, kConstantVelocity where they do not (every initial
+  /// pose so far equal to the first scan's: a sequence read with no poses).
+  kAuto,
+  /// The previous scan's registered pose moved by the odometry step (3DTK's correction).
+  kOdometry,
+  /// The previous scan's registered pose moved by the previous registered step again, scaled by the
+  /// scans' times where they are known (KISS-ICP's constant velocity).
+  kConstantVelocity,
+};
+inline constexpr std::array<EnumName<MotionModel>, 3> kMotionModelNames{
+    {{MotionModel::kAuto, "auto"},
+     {MotionModel::kOdometry, "odometry"},
+     {MotionModel::kConstantVelocity, "constant-velocity"}}};
+const char* to_string(MotionModel model);
+MotionModel parse_motion_model(const std::string& text);  ///< a name of kMotionModelNames
+
+/// The motion model, the adaptive pair bound and the deskew of a moving sensor's sweeps.
+struct MotionSettings {
+  MotionModel model = MotionModel::kAuto;
+  /// Constant velocity: the first match of a scan starts at a pair bound of this many times the
+  /// RMS of how far recent predictions were off (the points' RMS displacement from the predicted
+  /// start to the trusted match, KISS-ICP's adaptive threshold), when that is wider than the pair
+  /// bound: a hand-held sweep that turns 6 degrees a step starts within reach, a slow robot keeps
+  /// the pair bound. Never wider than the widest retry. 0: off.
+  double adaptive_bound_sigmas = 3.0;
+  int adaptive_bound_window = 20;  ///< ...over the trusted matches of the last this many scans
+  /// ...and before there is any (the first two steps), this wide (KISS-ICP's initial threshold):
+  /// the speed is not known yet, and a spinning sensor moving a metre a sweep down a tunnel, matched
+  /// at 25 cm from standing still, settles on the tunnel's walls where it started, and looks right.
+  double initial_bound_cm = 200.0;
+  /// Scans whose points carry their times within one sweep are deskewed (filter/deskew.hpp) by the
+  /// constant-velocity motion of the step into them, and again by the registered step.
+  DeskewMode deskew = DeskewMode::kAuto;
+  /// Times spanning more than this are not one sweep of a moving sensor (a tilting scanner or a
+  /// TLS, standing while it scans): not deskewed.
+  double max_sweep_s = 1.0;
+  /// A sweep is deskewed again, and matched again, when its registered step's motion over the sweep
+  /// differs from the predicted one by more than this (at the sweep's end)...
+  double refine_min_change_cm = 1.0;
+  double refine_min_change_deg = 0.1;  ///< ...or turns more than this
+  /// A match that needed a retry and moved the scan's points more than this many times the RMS of
+  /// the recent prediction errors (with at least confirm_min_history of them) is not trusted on its
+  /// point statistics alone: a second match from the other model's start (standing still, or the
+  /// odometry) must end within confirm_agree_cm / _deg of it, or it is doubtful. A 4 m retry can
+  /// settle a corridor's surfaces onto each other metres from the truth and look perfect.
+  double confirm_sigmas = 6.0;
+  int confirm_min_history = 3;
+  double confirm_agree_cm = 5.0;
+  double confirm_agree_deg = 0.5;
+  void validate() const;
+  bool operator==(const MotionSettings&) const = default;
+};
 
 /// Closing loops (pairwise and incremental matching; slam/loop_closing.cpp, slam/pose_graph.hpp).
 /// After the last scan, a scan that stands near one at least min_scan_gap scans earlier is matched
@@ -110,6 +166,11 @@ struct MappingSettings {
   /// pairwise_icp() never asks for more pairs than this: a pair of scans that overlaps can be
   /// registered.
   int min_overlap_pairs = IcpTermination{}.min_pairs;
+  /// ...but a scan with few points asks for at most this fraction of its data points (the 250 pairs
+  /// were written for the paper's 80 000-point scans; a 5 000-point LiDAR keyframe reduces to about
+  /// 1 500 voxel means). At least 3, Horn's minimum. The health check's paired fraction judges the
+  /// rest.
+  double min_overlap_fraction = 0.1;
   double moved_translation_cm = 5.0;      ///< step 3c: a match "moved" the scan beyond this...
   double moved_rotation_deg = 0.25;       ///< ...or this
   /// kSimultaneous, step 3: a scan is matched against the union of at most this many scans that
@@ -143,6 +204,7 @@ struct MappingSettings {
   /// rung beyond it is tried at it (once), so a bound of 2 m is retried at 4 m.
   float max_retry_bound_cm = 400.0f;
   LoopClosureSettings loops;
+  MotionSettings motion;
 
   /// The default preset's ICP: the paper's schedule, then a refinement at 7.5 cm (0.3 x 25 cm),
   /// Anderson-accelerated, a phase converged when a step moves less than 1 mm and turns less than
@@ -163,6 +225,9 @@ struct MappingSettings {
   /// What every match of a scan against others runs (steps 1 and 3, retries, loop matches and the
   /// health check's bound): `icp`, asking for no more pairs than the overlap test.
   IcpSettings pairwise_icp() const;
+  /// The pairs a match of a scan with `data_points` reduced points needs: pairwise_icp()'s, or
+  /// min_overlap_fraction of its points where that is fewer (at least 3).
+  int min_pairs_for(std::size_t data_points) const;
   /// Step 3's matches: pairwise_icp() converged at relaxation_min_step_cm / _deg (where > 0).
   IcpSettings relaxation_icp() const;
   /// Whether scans keep a separate, denser model cloud of voxel means (kVoxel).

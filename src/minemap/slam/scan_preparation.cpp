@@ -76,11 +76,35 @@ void ScanPreparation::keep_for_the_map(PreparedScan& prepared, const Scan& scan,
   }
 }
 
-PreparedScan ScanPreparation::prepare(const Scan& scan, RunControl& control) {
-  VoxelMeans voxel = control.timed(&StageTimes::filter_s, [&] { return voxel_means(scan); });
-  Reduced reduced = reduce(scan, std::move(voxel), control);
+SweepTiming ScanPreparation::timing_of(const Scan& scan) const {
+  if (settings_.motion.deskew == DeskewMode::kOff) return {};
+  return sweep_timing(scan, settings_.motion.max_sweep_s);
+}
+
+PreparedScan ScanPreparation::prepare(const Scan& scan, RunControl& control, const SweepTiming& timing,
+                                      const std::optional<Pose>& sweep_motion) {
+  // A deskewed sweep is reduced from a copy whose points moved (its intensities go along).
+  Scan deskewed;
+  const bool deskewing = !timing.empty() && sweep_motion.has_value();
+  if (deskewing) {
+    control.timed(&StageTimes::filter_s, [&] {
+      deskewed.name = scan.name;
+      deskewed.local_origin_cm = scan.local_origin_cm;
+      deskewed.slice_offsets = scan.slice_offsets;
+      deskewed.attributes.intensity = scan.attributes.intensity;
+      deskewed.points_cm = deskewed_points(scan, timing, *sweep_motion);
+    });
+  }
+  const Scan& source = deskewing ? deskewed : scan;
+  VoxelMeans voxel = control.timed(&StageTimes::filter_s, [&] { return voxel_means(source); });
+  Reduced reduced = reduce(source, std::move(voxel), control);
   PreparedScan prepared;
-  keep_for_the_map(prepared, scan, reduced);
+  keep_for_the_map(prepared, source, reduced);
+  if (!timing.empty()) {
+    prepared.stamp_s = timing.stamp_s;
+    prepared.sweep_s = timing.duration_s;
+  }
+  if (deskewing) prepared.sweep_motion = sweep_motion;
   control.timed(&StageTimes::tree_build_s, [&] {
     prepared.cloud = backend_.prepare(std::move(reduced.data), settings_.tree);
     prepared.model_cloud = reduced.has_model ? backend_.prepare(std::move(reduced.model), settings_.tree) : prepared.cloud;

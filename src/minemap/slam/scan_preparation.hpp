@@ -8,12 +8,14 @@
 // with the same function and build the same trees.
 //
 // Thread-safety: uses the backend, one thread at a time.
+#include <limits>
 #include <memory>
 #include <optional>
 #include <vector>
 
 #include "minemap/backend/compute_backend.hpp"
 #include "minemap/core/scan.hpp"
+#include "minemap/filter/deskew.hpp"
 #include "minemap/registration/match_information.hpp"
 #include "minemap/slam/mapping_settings.hpp"
 #include "minemap/slam/run_control.hpp"
@@ -31,6 +33,10 @@ struct PreparedScan {
   std::shared_ptr<const std::vector<float>> used_intensity;
   std::size_t points_in = 0;
   std::size_t outliers_replaced = 0;
+  /// A moving sensor's sweep (filter/deskew.hpp): its middle on the file's clock (NaN: no times)...
+  double stamp_s = std::numeric_limits<double>::quiet_NaN();
+  double sweep_s = 0.0;  ///< ...and its duration (0: not one sweep, never deskewed)
+  std::optional<Pose> sweep_motion;  ///< the motion over the sweep its clouds were deskewed by
   const SurfaceNormals* planes_or_null() const { return planes ? &*planes : nullptr; }
 };
 
@@ -38,8 +44,12 @@ class ScanPreparation {
  public:
   ScanPreparation(const MappingSettings& settings, ComputeBackend& backend) : settings_(settings), backend_(backend) {}
 
-  /// One scan, alone (its trees by prepare).
-  PreparedScan prepare(const Scan& scan, RunControl& control);
+  /// One scan, alone (its trees by prepare); deskewed by `sweep_motion` (the sensor's motion over
+  /// the sweep, its own frame, cm) when `timing` holds the points' times.
+  PreparedScan prepare(const Scan& scan, RunControl& control, const SweepTiming& timing = {},
+                       const std::optional<Pose>& sweep_motion = std::nullopt);
+  /// The timing of a scan as MotionSettings::deskew asks (empty: not deskewed).
+  SweepTiming timing_of(const Scan& scan) const;
   /// Every scan, in order (the voxel means in parallel, the trees in one prepare_many call each for
   /// data, models and probes); reports "filtering" after each scan is reduced.
   std::vector<PreparedScan> prepare_all(const std::vector<Scan>& scans, RunControl& control);

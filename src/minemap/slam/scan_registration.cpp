@@ -11,9 +11,16 @@ RegistrationHealth ScanRegistration::judge(const PreparedScan& scan, const Pose&
                             scan.planes_or_null());
 }
 
+IcpSettings ScanRegistration::icp_for(const PreparedScan& scan) const {
+  IcpSettings icp = icp_;
+  icp.termination.min_pairs = settings_.min_pairs_for(scan.cloud->points().size());
+  return icp;
+}
+
 WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, const Pose& start,
                                                   std::span<const WorldModel> models, float bound_cm) const {
-  IcpSettings wide = icp_;
+  const IcpSettings icp = icp_for(scan);
+  IcpSettings wide = icp;
   wide.max_pair_dist_cm = bound_cm;
   wide.refine_pair_dist_fraction = 0.0f;
   WideMatch match;
@@ -21,12 +28,15 @@ WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, cons
   match.iterations += coarse.iterations();
   if (!coarse.ok()) {
     match.failure = to_string(coarse.stop);
+    match.failed = coarse;
     return match;
   }
-  IcpResult fine = register_icp(backend_, *scan.cloud, coarse.world_from_data, models, icp_);
+  IcpResult fine = register_icp(backend_, *scan.cloud, coarse.world_from_data, models, icp);
   match.iterations += fine.iterations();
   if (!fine.ok()) {
     match.failure = to_string(fine.stop);
+    match.failed = fine;
+    match.failed.world_from_data = start;
     return match;
   }
   match.health = judge(scan, fine.world_from_data, start, models, bound_cm);
@@ -35,15 +45,29 @@ WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, cons
 }
 
 ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& start,
-                                          const ModelsForBound& models_for) const {
+                                          const ModelsForBound& models_for, float start_bound_cm) const {
   ScanMatch match;
-  const std::vector<WorldModel> models = models_for(icp_.max_pair_dist_cm, start);
-  match.first = register_icp(backend_, *scan.cloud, start, models, icp_);
-  match.iterations = match.first.iterations();
-  if (!match.first.ok()) return match;
-  match.health = judge(scan, match.first.world_from_data, start, models);
-  std::string tried;
   float widest_cm = icp_.max_pair_dist_cm;
+  if (start_bound_cm > widest_cm) {
+    // The motion model's adaptive bound: the first match is a wide one, coarse to fine.
+    const std::vector<WorldModel> models = models_for(start_bound_cm, start);
+    WideMatch wide = match_from_wide_bound(scan, start, models, start_bound_cm);
+    match.iterations = wide.iterations;
+    if (!wide.fine) {
+      match.first = wide.failed;
+      return match;
+    }
+    match.first = std::move(*wide.fine);
+    match.health = std::move(wide.health);
+    widest_cm = start_bound_cm;
+  } else {
+    const std::vector<WorldModel> models = models_for(icp_.max_pair_dist_cm, start);
+    match.first = register_icp(backend_, *scan.cloud, start, models, icp_for(scan));
+    match.iterations = match.first.iterations();
+    if (!match.first.ok()) return match;
+    match.health = judge(scan, match.first.world_from_data, start, models);
+  }
+  std::string tried;
   for (const float factor : settings_.retry_bound_factors) {
     if (!match.health.doubtful()) return match;
     // Each rung is clamped to the widest retry, so a wide bound of the user's own (2 m, where the

@@ -32,7 +32,8 @@ struct ScanMatch {
 
 /// A match that starts at a wide bound and then runs the usual phases.
 struct WideMatch {
-  std::optional<IcpResult> fine;  ///< empty: an ICP run failed (`failure` says how)
+  std::optional<IcpResult> fine;  ///< empty: an ICP run failed (`failure` says how, `failed` which)
+  IcpResult failed;
   RegistrationHealth health;
   std::string failure;
   int iterations = 0;             ///< both runs'
@@ -52,8 +53,10 @@ class ScanRegistration {
   const IcpSettings& icp() const { return icp_; }
 
   /// Registers `scan` from `start` and judges the match; a doubtful one is tried again from the
-  /// same start at each wider bound, until one is trusted.
-  ScanMatch register_scan(const PreparedScan& scan, const Pose& start, const ModelsForBound& models_for) const;
+  /// same start at each wider bound, until one is trusted. `start_bound_cm` wider than the pair
+  /// bound (the motion model's adaptive bound): the first match already starts there, coarse to fine.
+  ScanMatch register_scan(const PreparedScan& scan, const Pose& start, const ModelsForBound& models_for,
+                          float start_bound_cm = 0.0f) const;
 
   /// ICP at `bound_cm` from `start` (no refinement), then the usual phases from where that ended,
   /// judged with the reach of the wide bound.
@@ -66,6 +69,10 @@ class ScanRegistration {
                            std::span<const WorldModel> models, float reach_bound_cm = 0.0f) const;
 
  private:
+  /// The ICP for `scan`: icp_, asking for no more pairs than the scan's size allows
+  /// (MappingSettings::min_pairs_for).
+  IcpSettings icp_for(const PreparedScan& scan) const;
+
   const MappingSettings& settings_;
   ComputeBackend& backend_;
   IcpSettings icp_;

@@ -1,5 +1,8 @@
 #include "minemap/slam/survey_matcher.hpp"
 
+#include <algorithm>
+#include <cstdio>
+
 namespace minemap::detail {
 
 SurveyMatcher::SurveyMatcher(const MappingSettings& settings, ComputeBackend& backend, RunControl control)
@@ -8,6 +11,7 @@ SurveyMatcher::SurveyMatcher(const MappingSettings& settings, ComputeBackend& ba
       control_(std::move(control)),
       preparation_(settings, backend),
       local_map_(settings, backend),
+      motion_(settings),
       registration_(settings, backend),
       relaxation_(settings, backend, registration_, local_map_),
       loop_closing_(settings, backend, registration_, local_map_),
@@ -23,6 +27,23 @@ void SurveyMatcher::append(const Scan& scan, PreparedScan prepared) {
 
 MappingResult SurveyMatcher::run(const std::vector<Scan>& scans) {
   control_.expect(scans.size());
+  const bool sweeps = std::any_of(scans.begin(), scans.end(), [&](const Scan& scan) {
+    return settings_.motion.deskew != DeskewMode::kOff && !scan.attributes.time_s.empty();
+  });
+  if (sweeps) {
+    // A moving sensor's sweeps: each is deskewed by the motion before it, so each is prepared as it
+    // arrives, as `add` does.
+    for (std::size_t i = 0; i < scans.size(); ++i) {
+      if (i > 0 && control_.stop_requested()) {
+        interrupted_ = true;
+        scans_matched_ = i;
+        return result();
+      }
+      arrive(scans[i]);
+    }
+    finish();
+    return result();
+  }
   std::vector<PreparedScan> prepared = preparation_.prepare_all(scans, control_);
   for (std::size_t i = 0; i < scans.size(); ++i) append(scans[i], std::move(prepared[i]));
   for (std::size_t i = 1; i < scans.size(); ++i) {
@@ -40,8 +61,32 @@ MappingResult SurveyMatcher::run(const std::vector<Scan>& scans) {
 
 void SurveyMatcher::add(const Scan& scan) {
   control_.expect(state_.size() + 1);
-  append(scan, preparation_.prepare(scan, control_));
-  if (state_.size() > 1) match_scan(state_.size() - 1);
+  arrive(scan);
+}
+
+void SurveyMatcher::arrive(const Scan& scan) {
+  const SweepTiming timing = preparation_.timing_of(scan);
+  if (timing.empty()) {
+    append(scan, preparation_.prepare(scan, control_));
+    if (state_.size() > 1) match_scan(state_.size() - 1);
+    return;
+  }
+  // In the state first (its pose and stamp), so the motion model can predict it; then prepared.
+  const std::size_t i = state_.size();
+  PreparedScan stamped;
+  stamped.stamp_s = timing.stamp_s;
+  stamped.sweep_s = timing.duration_s;
+  append(scan, std::move(stamped));
+  std::optional<Pose> sweep_motion;
+  if (i >= 2 && state_.registered(i - 1)) {
+    sweep_motion = motion_.sweep_motion(state_, i, motion_.predict(state_, i).start, i - 1);
+  }
+  state_.set_prepared(i, preparation_.prepare(scan, control_, timing, sweep_motion));
+  if (i == 0) {
+    first_sweep_ = scan;
+    return;
+  }
+  match_scan(i, &scan, &timing);
 }
 
 void SurveyMatcher::restore(const Scan& scan, const ScanOutcome& outcome) {
@@ -58,18 +103,13 @@ void SurveyMatcher::restore_counters(const MappingResult& saved) {
   control_.times() = saved.times;
 }
 
-Pose SurveyMatcher::predicted_start(std::size_t i) const {
-  const Pose odometry_step = rigid_inverse(state_.odometry(i - 1)) * state_.odometry(i);
-  return state_.pose(i - 1) * odometry_step;
-}
-
-ScanMatch SurveyMatcher::match_pairwise(std::size_t i, const Pose& start) const {
+ScanMatch SurveyMatcher::match_pairwise(std::size_t i, const Pose& start, float start_bound_cm) const {
   const std::size_t previous[] = {i - 1};
-  return registration_.register_scan(state_.prepared(i), start,
-                                     [&](float, const Pose&) { return state_.models_of(previous); });
+  return registration_.register_scan(
+      state_.prepared(i), start, [&](float, const Pose&) { return state_.models_of(previous); }, start_bound_cm);
 }
 
-ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start) const {
+ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, float start_bound_cm) const {
   // In the frame of scan i-1, so the metascan's float coordinates stay small wherever the survey
   // is; the metascans made for each bound live until the scan is registered.
   const Pose frame = state_.pose(i - 1);
@@ -78,7 +118,96 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start) con
     const double grow_cm = double(bound_cm) + settings_.metascan_margin_cm;
     metascans.push_back(local_map_.metascan(state_, i, standing, frame, start, grow_cm, LocalMap::Scope::kEarlier));
     return std::vector<WorldModel>{{metascans.back().get(), frame}};
-  });
+  }, start_bound_cm);
+}
+
+ScanMatch SurveyMatcher::match_from(std::size_t i, const Prediction& prediction) const {
+  return settings_.mode == MatchingMode::kIncremental ? match_incremental(i, prediction.start, prediction.start_bound_cm)
+                                                      : match_pairwise(i, prediction.start, prediction.start_bound_cm);
+}
+
+void SurveyMatcher::place(std::size_t i, const ScanMatch& match, const Pose& start) {
+  if (!match.ok()) {
+    state_.fail(i, start, match.first);
+    return;
+  }
+  state_.place(i, match.first.world_from_data, match.first);
+  if (match.retry) state_.place(i, match.retry->world_from_data, *match.retry);
+  state_.judged(i, match.health);
+}
+
+void SurveyMatcher::confirm_far_match(std::size_t i, ScanMatch& match) {
+  const MotionSettings& motion = settings_.motion;
+  if (!match.ok() || !match.retry || match.health.doubtful()) return;
+  const PredictionError recent = motion_.recent_error(state_, i);
+  if (recent.count < motion.confirm_min_history) return;
+  const double far_cm = std::max<double>(motion.confirm_sigmas * recent.rms_cm, settings_.icp.max_pair_dist_cm);
+  if (!(match.health.moved_cm > far_cm)) return;
+  Prediction other;
+  other.start = motion_.alternative_start(state_, i);
+  other.start_bound_cm = match.health.retry_bound_cm;
+  const ScanMatch second = match_from(i, other);
+  step1_iterations_ += second.iterations;
+  const Pose kept = match.retry->world_from_data;
+  char text[320];
+  if (second.ok() && !second.health.doubtful()) {
+    const Pose found = second.retry ? second.retry->world_from_data : second.first.world_from_data;
+    const Pose apart = rigid_inverse(kept) * found;
+    if (translation_norm(apart) <= motion.confirm_agree_cm && rotation_angle_deg(apart) <= motion.confirm_agree_deg) {
+      return;  // two starts, one pose: confirmed
+    }
+    std::snprintf(text, sizeof text,
+                  "the %g cm retry moved its points %.0f cm, %.0f times the recent predictions' error (%.1f cm RMS), "
+                  "and a second match from %s ended %.0f cm / %.1f deg from it: not confirmed",
+                  double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
+                  recent.rms_cm, motion_.constant_velocity_at(state_, i) ? "the odometry's start" : "standing still",
+                  translation_norm(apart), rotation_angle_deg(apart));
+  } else {
+    std::snprintf(text, sizeof text,
+                  "the %g cm retry moved its points %.0f cm, %.0f times the recent predictions' error (%.1f cm RMS), "
+                  "and a second match from another start was not trusted: not confirmed",
+                  double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
+                  recent.rms_cm);
+  }
+  match.health.doubt = text;
+}
+
+void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTiming& timing) {
+  if (!state_.registered(i)) return;
+  bool models_changed = false;
+  if (i == 1 && first_sweep_) {
+    const SweepTiming first_timing = preparation_.timing_of(*first_sweep_);
+    const Pose first_motion = motion_.sweep_motion(state_, 0, state_.pose(0), 1);
+    state_.set_prepared(0, preparation_.prepare(*first_sweep_, control_, first_timing, first_motion));
+    first_sweep_.reset();
+    models_changed = true;
+  }
+  const Pose refined = motion_.sweep_motion(state_, i, state_.pose(i), i - 1);
+  const std::optional<Pose>& used = state_.prepared(i).sweep_motion;
+  const Pose change = used ? rigid_inverse(*used) * refined : refined;
+  const MotionSettings& motion = settings_.motion;
+  if (!models_changed && translation_norm(change) < motion.refine_min_change_cm &&
+      rotation_angle_deg(change) < motion.refine_min_change_deg) {
+    return;
+  }
+  PreparedScan first = state_.prepared(i);
+  const RegistrationHealth first_health = state_.health(i);
+  state_.set_prepared(i, preparation_.prepare(raw, control_, timing, refined));
+  Prediction here;
+  here.start = state_.pose(i);
+  here.start_bound_cm = settings_.pairwise_icp().max_pair_dist_cm;
+  ScanMatch again = match_from(i, here);
+  step1_iterations_ += again.iterations;
+  if (!again.ok() || (again.health.doubtful() && !first_health.doubtful())) {
+    state_.set_prepared(i, std::move(first));  // the first deskew's match stands
+    return;
+  }
+  // The prediction's error is the first match's (the motion model's adaptive bound learns from it).
+  again.health.correction_cm = first_health.correction_cm;
+  again.health.correction_deg = first_health.correction_deg;
+  again.health.moved_cm = first_health.moved_cm;
+  again.health.retry_bound_cm = first_health.retry_bound_cm;
+  place(i, again, here.start);
 }
 
 void SurveyMatcher::relax(std::size_t newest, int budget) {
@@ -87,20 +216,15 @@ void SurveyMatcher::relax(std::size_t newest, int budget) {
   step3_iterations_ += tally.iterations;
 }
 
-void SurveyMatcher::match_scan(std::size_t i) {
+void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming* timing) {
   const RunControl::Stopwatch arrived;
   control_.timed(&StageTimes::pairwise_s, [&] {
-    const Pose start = predicted_start(i);
-    const ScanMatch match =
-        settings_.mode == MatchingMode::kIncremental ? match_incremental(i, start) : match_pairwise(i, start);
+    const Prediction prediction = motion_.predict(state_, i);
+    ScanMatch match = match_from(i, prediction);
     step1_iterations_ += match.iterations;
-    if (!match.ok()) {
-      state_.fail(i, start, match.first);
-      return;
-    }
-    state_.place(i, match.first.world_from_data, match.first);
-    if (match.retry) state_.place(i, match.retry->world_from_data, *match.retry);
-    state_.judged(i, match.health);
+    confirm_far_match(i, match);
+    place(i, match, prediction.start);
+    if (raw != nullptr && timing != nullptr) refine_deskew(i, *raw, *timing);
   });
   if (settings_.mode == MatchingMode::kSimultaneous) {
     control_.timed(&StageTimes::relaxation_s, [&] {

@@ -11,12 +11,14 @@
 //
 // Thread-safety: one thread at a time. A BackendError propagates (map_survey starts a fresh matcher
 // on a CPU backend); nothing here is reset by hand.
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "minemap/backend/compute_backend.hpp"
 #include "minemap/slam/local_map.hpp"
 #include "minemap/slam/loop_closing.hpp"
+#include "minemap/slam/motion_model.hpp"
 #include "minemap/slam/relaxation.hpp"
 #include "minemap/slam/run_control.hpp"
 #include "minemap/slam/scan_preparation.hpp"
@@ -51,15 +53,25 @@ class SurveyMatcher {
  private:
   /// Appends a prepared scan (and the note a skipped slice filter asks for).
   void append(const Scan& scan, PreparedScan prepared);
-  /// Scan i, arrived: the mode's match, and for kSimultaneous the relaxation after it (steps 2 and
-  /// 3, within the per-scan budget).
-  void match_scan(std::size_t i);
-  /// Where scan i starts: scan i-1's registered pose, moved by the odometry step from i-1 to i
-  /// (3DTK's correction).
-  Pose predicted_start(std::size_t i) const;
+  /// One scan arrives (run's sweeps, and add): prepared (a sweep deskewed by the motion predicted
+  /// for it) and matched.
+  void arrive(const Scan& scan);
+  /// Scan i, arrived: the mode's match from where the motion model predicts it (a sweep's deskew
+  /// refined by its registered step), and for kSimultaneous the relaxation after it (steps 2 and 3,
+  /// within the per-scan budget). `raw`: the sweep itself, to deskew again.
+  void match_scan(std::size_t i, const Scan* raw = nullptr, const SweepTiming* timing = nullptr);
   /// Step 1 (and the pairwise mode): scan i against scan i-1. Incremental: against the metascan.
-  ScanMatch match_pairwise(std::size_t i, const Pose& start) const;
-  ScanMatch match_incremental(std::size_t i, const Pose& start) const;
+  ScanMatch match_pairwise(std::size_t i, const Pose& start, float start_bound_cm) const;
+  ScanMatch match_incremental(std::size_t i, const Pose& start, float start_bound_cm) const;
+  ScanMatch match_from(std::size_t i, const Prediction& prediction) const;
+  /// A retry that landed far from the prediction (MotionSettings::confirm_sigmas): matched again from
+  /// the other model's start; doubtful unless both end at the same pose.
+  void confirm_far_match(std::size_t i, ScanMatch& match);
+  /// Places scan i where `match` put it (or fails it at `start`).
+  void place(std::size_t i, const ScanMatch& match, const Pose& start);
+  /// A sweep registered: deskewed again by the step its match found, and matched again from there
+  /// where that moved it (kept when no worse). Scan 1 first deskews scan 0, by the same step.
+  void refine_deskew(std::size_t i, const Scan& raw, const SweepTiming& timing);
   void relax(std::size_t newest, int budget);
 
   const MappingSettings& settings_;
@@ -68,6 +80,7 @@ class SurveyMatcher {
   ScanPreparation preparation_;
   SurveyState state_;
   LocalMap local_map_;
+  MotionPrediction motion_;
   ScanRegistration registration_;
   Relaxation relaxation_;
   LoopClosing loop_closing_;
@@ -79,6 +92,9 @@ class SurveyMatcher {
   bool interrupted_ = false;
   std::size_t scans_matched_ = 0;
   bool noted_unstructured_ = false;
+  /// The first sweep as read, kept until scan 1 is registered: then the step between them says how
+  /// to deskew it.
+  std::optional<Scan> first_sweep_;
 };
 
 }  // namespace minemap::detail

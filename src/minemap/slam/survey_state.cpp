@@ -16,13 +16,22 @@ std::size_t SurveyState::add(const Scan& scan, PreparedScan prepared) {
   outcome.pose_cm = scan.pose_cm;
   outcome.frames.push_back({scan.pose_cm, 0});
   outcome.world_from_points = state.odometry;
+  const std::size_t i = scans_.size() - 1;
+  if (i > 0 && first_moved_ > i && scan.pose_cm != scans_.front().outcome.initial_pose_cm) first_moved_ = i;
+  set_prepared(i, std::move(prepared));
+  return i;
+}
+
+void SurveyState::set_prepared(std::size_t i, PreparedScan prepared) {
+  ScanOutcome& outcome = scans_[i].outcome;
   outcome.points_in = prepared.points_in;
-  outcome.points_used = prepared.used_points_cm->size();
+  outcome.points_used = prepared.used_points_cm ? prepared.used_points_cm->size() : 0;
   outcome.outliers_replaced = prepared.outliers_replaced;
   outcome.used_points_cm = prepared.used_points_cm;
   outcome.used_intensity = prepared.used_intensity;
-  state.prepared = std::move(prepared);
-  return scans_.size() - 1;
+  outcome.stamp_s = prepared.stamp_s;
+  outcome.sweep_motion_cm = prepared.sweep_motion;
+  scans_[i].prepared = std::move(prepared);
 }
 
 void SurveyState::place(std::size_t i, const Pose& world_from_points, const IcpResult& match) {

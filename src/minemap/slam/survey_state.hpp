@@ -29,6 +29,13 @@ class SurveyState {
   const Pose& pose(std::size_t i) const { return scans_[i].outcome.world_from_points; }
   /// The initial T_world_points (odometry, or the initial guess).
   const Pose& odometry(std::size_t i) const { return scans_[i].odometry; }
+  /// T_points_file of scan i (its local origin): T_world_file = pose(i) * points_from_file(i).
+  const Pose& points_from_file(std::size_t i) const { return scans_[i].points_from_file; }
+  /// Whether some scan up to i starts from a pose of its own (T_world_file not the first scan's):
+  /// the survey carries odometry or initial poses there.
+  bool odometry_moved_by(std::size_t i) const { return first_moved_ <= i; }
+  /// Scan i prepared again (deskewed by a better motion): its clouds and counts; its pose stays.
+  void set_prepared(std::size_t i, PreparedScan prepared);
   bool registered(std::size_t i) const { return scans_[i].outcome.registered; }
   const RegistrationHealth& health(std::size_t i) const { return scans_[i].outcome.health; }
 
@@ -63,6 +70,7 @@ class SurveyState {
     ScanOutcome outcome;                       ///< outcome.world_from_points: the current pose
   };
   std::vector<ScanState> scans_;
+  std::size_t first_moved_ = static_cast<std::size_t>(-1);  ///< the first scan whose initial pose is its own
 };
 
 }  // namespace minemap::detail

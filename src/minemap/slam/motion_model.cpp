@@ -1,0 +1,97 @@
+#include "minemap/slam/motion_model.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace minemap::detail {
+
+bool MotionPrediction::constant_velocity_at(const SurveyState& state, std::size_t i) const {
+  switch (settings_.motion.model) {
+    case MotionModel::kOdometry: return false;
+    case MotionModel::kConstantVelocity: return true;
+    case MotionModel::kAuto: return !state.odometry_moved_by(i);
+  }
+  return false;
+}
+
+Pose MotionPrediction::file_pose(const SurveyState& state, std::size_t i, const Pose& world_from_points) {
+  return world_from_points * state.points_from_file(i);
+}
+
+double MotionPrediction::time_ratio(const SurveyState& state, std::size_t a, std::size_t b, std::size_t c,
+                                    std::size_t d, double fallback) {
+  const double top = state.prepared(b).stamp_s - state.prepared(a).stamp_s;
+  const double bottom = state.prepared(d).stamp_s - state.prepared(c).stamp_s;
+  if (!(top > 0.0) || !(bottom > 0.0) || !std::isfinite(top) || !std::isfinite(bottom)) return fallback;
+  return top / bottom;
+}
+
+Prediction MotionPrediction::predict(const SurveyState& state, std::size_t i) const {
+  Prediction prediction;
+  prediction.start_bound_cm = settings_.pairwise_icp().max_pair_dist_cm;
+  if (!constant_velocity_at(state, i)) {
+    const Pose odometry_step = rigid_inverse(state.odometry(i - 1)) * state.odometry(i);
+    prediction.start = state.pose(i - 1) * odometry_step;
+    return prediction;
+  }
+  prediction.constant_velocity = true;
+  const Pose previous = file_pose(state, i - 1, state.pose(i - 1));
+  Pose step = Pose::Identity();
+  if (i >= 2 && state.registered(i - 1) && state.registered(i - 2)) {
+    step = rigid_inverse(file_pose(state, i - 2, state.pose(i - 2))) * previous;
+    step = motion_fraction(step, time_ratio(state, i - 1, i, i - 2, i - 1, 1.0));
+  }
+  prediction.start = previous * step * rigid_inverse(state.points_from_file(i));
+  prediction.start_bound_cm = std::max(prediction.start_bound_cm, adaptive_bound_cm(state, i));
+  return prediction;
+}
+
+PredictionError MotionPrediction::recent_error(const SurveyState& state, std::size_t i) const {
+  double sum_squares = 0.0;
+  PredictionError error;
+  const std::size_t window = static_cast<std::size_t>(settings_.motion.adaptive_bound_window);
+  for (std::size_t j = i > window ? i - window : 1; j < i; ++j) {
+    if (!state.registered(j)) continue;
+    // Scan 1 by constant velocity was predicted standing still: its correction is the step itself.
+    if (j < 2 && constant_velocity_at(state, j)) continue;
+    const RegistrationHealth& health = state.health(j);
+    if (!health.judged || health.doubtful()) continue;
+    sum_squares += health.moved_cm * health.moved_cm;
+    ++error.count;
+  }
+  if (error.count > 0) error.rms_cm = std::sqrt(sum_squares / error.count);
+  return error;
+}
+
+float MotionPrediction::adaptive_bound_cm(const SurveyState& state, std::size_t i) const {
+  const MotionSettings& motion = settings_.motion;
+  if (!(motion.adaptive_bound_sigmas > 0.0)) return 0.0f;
+  const PredictionError error = recent_error(state, i);
+  if (error.count == 0) return static_cast<float>(std::min<double>(motion.initial_bound_cm, settings_.max_retry_bound_cm));
+  const double bound = motion.adaptive_bound_sigmas * error.rms_cm;
+  return static_cast<float>(std::min<double>(bound, settings_.max_retry_bound_cm));
+}
+
+Pose MotionPrediction::alternative_start(const SurveyState& state, std::size_t i) const {
+  if (constant_velocity_at(state, i)) {
+    const Pose odometry_step = rigid_inverse(state.odometry(i - 1)) * state.odometry(i);
+    return state.pose(i - 1) * odometry_step;
+  }
+  return file_pose(state, i - 1, state.pose(i - 1)) * rigid_inverse(state.points_from_file(i));
+}
+
+Pose MotionPrediction::sweep_motion(const SurveyState& state, std::size_t j, const Pose& pose_j,
+                                    std::size_t other) const {
+  const Pose here = file_pose(state, j, pose_j);
+  const Pose there = file_pose(state, other, state.pose(other));
+  // The step forward in time, from the earlier scan to the later, in the earlier one's frame.
+  const bool later = other > j;
+  const Pose step = later ? rigid_inverse(here) * there : rigid_inverse(there) * here;
+  const std::size_t first = later ? j : other, second = later ? other : j;
+  const double sweep = state.prepared(j).sweep_s;
+  const double between = state.prepared(second).stamp_s - state.prepared(first).stamp_s;
+  const double fraction = (between > 0.0 && std::isfinite(between)) ? std::min(sweep / between, 1.5) : 1.0;
+  return motion_fraction(step, fraction);
+}
+
+}  // namespace minemap::detail

@@ -1,0 +1,71 @@
+#pragma once
+// Internal (not installed). Where a scan's match starts, how wide it first looks, and how the
+// sensor moved during its sweep. A stop-and-go survey starts each scan where the odometry says
+// (3DTK's correction: the previous registered pose moved by the odometry step). A sequence with no
+// odometry (a moving LiDAR's sweeps read with no poses) starts each scan at the previous registered
+// pose moved by the previous registered step again (constant velocity, as KISS-ICP), scaled by the
+// sweeps' times where the files carry them; its first match then looks as wide as recent
+// predictions were off (KISS-ICP's adaptive threshold), so a fast hand-held sweep and a slow robot
+// both start within reach. The same constant velocity over one sweep is what the deskew undoes
+// (filter/deskew.hpp).
+//
+// Reads the state, writes nothing. Thread-safety: const, one thread at a time with the state.
+#include <cstddef>
+
+#include "minemap/core/pose.hpp"
+#include "minemap/slam/mapping_settings.hpp"
+#include "minemap/slam/survey_state.hpp"
+
+namespace minemap::detail {
+
+/// How far the motion model's recent predictions were off: the RMS displacement of the points from
+/// each predicted start to its trusted match (RegistrationHealth::moved_cm), over the last
+/// adaptive_bound_window scans.
+struct PredictionError {
+  double rms_cm = 0.0;
+  int count = 0;  ///< trusted matches it is taken over (0: no history yet)
+};
+
+/// Where scan i's match starts.
+struct Prediction {
+  Pose start = Pose::Identity();  ///< T_world_points
+  bool constant_velocity = false; ///< predicted from the previous steps, not from odometry
+  float start_bound_cm = 0.0f;    ///< the pair bound its first match starts at (>= the pair bound)
+};
+
+class MotionPrediction {
+ public:
+  explicit MotionPrediction(const MappingSettings& settings) : settings_(settings) {}
+
+  /// Scan i (i >= 1, in the state) predicted from scans i-1 and i-2 as they stand now.
+  Prediction predict(const SurveyState& state, std::size_t i) const;
+  /// The other model's start for scan i, for a second opinion on a match that landed far from the
+  /// prediction: the odometry step where constant velocity predicted it, and standing still (the
+  /// previous scan's pose) where the odometry did.
+  Pose alternative_start(const SurveyState& state, std::size_t i) const;
+  /// How far the predictions before scan i were off.
+  PredictionError recent_error(const SurveyState& state, std::size_t i) const;
+  /// Whether scan i starts by constant velocity (MotionSettings::model; kAuto: no scan up to i
+  /// carries odometry of its own).
+  bool constant_velocity_at(const SurveyState& state, std::size_t i) const;
+  /// The sensor's motion over scan j's sweep (start to end, its own file frame, cm) if it stood at
+  /// T_world_points `pose_j` and scan `other` (j-1 or j+1) where the state holds it: the step
+  /// between them at constant velocity, scaled by the sweep's duration over the time between their
+  /// stamps (sweeps back to back, a spinning sensor's, where their stamps are not known).
+  Pose sweep_motion(const SurveyState& state, std::size_t j, const Pose& pose_j, std::size_t other) const;
+
+ private:
+  /// T_world_file of scan i at T_world_points `world_from_points`.
+  static Pose file_pose(const SurveyState& state, std::size_t i, const Pose& world_from_points);
+  /// (time from scan a to scan b) / (time from scan c to scan d), where every stamp is known and
+  /// both gaps are positive; `fallback` otherwise.
+  static double time_ratio(const SurveyState& state, std::size_t a, std::size_t b, std::size_t c, std::size_t d,
+                           double fallback);
+  /// The adaptive bound for scan i: adaptive_bound_sigmas x the RMS displacement of the trusted
+  /// constant-velocity predictions among the last window scans; 0 without any.
+  float adaptive_bound_cm(const SurveyState& state, std::size_t i) const;
+
+  const MappingSettings& settings_;
+};
+
+}  // namespace minemap::detail
