@@ -86,22 +86,34 @@ inline void scan_bucket(const KdPoint* points, std::int32_t begin, std::int32_t 
   }
 }
 
+/// How far above the hint's squared distance exact_nearest starts its bound (relative). The lower
+/// bounds of subtrees add and subtract squared gaps level by level in float, so they may overshoot
+/// the true distance to the box by up to about 2 * kMaxKdDepth * 2^-24 (7.6e-6) of the bound; a
+/// bound one ulp above the hint's distance (as before 2026-12-04) let such a subtree, holding the
+/// hint itself, be skipped, and the CPU then found no pair where the kernel found one (the Jinchuan
+/// scans at a 200 cm bound: one point in 200 000). 2^-12 is 30 times that error and still as tight a
+/// bound as the hint gives.
+inline constexpr float kHintBoundMargin = 1.0f / 4096.0f;
+
 /// Exact nearest neighbour with backtracking; only points closer than sqrt(best) are accepted,
 /// so `best` doubles as the maximum pair distance bound (radius-bounded descent). A subtree is
 /// visited only if a lower bound of its distance beats `best`: the bound adds up, per axis, the
 /// squared gap between the query and the children's actual extents (nanoflann's incremental
 /// distance, with the gap between the two children instead of the bare cut plane).
 ///
-/// `hint` (a tree point index, or -1) only tightens the starting bound to one ulp above the hint's
-/// distance; the hint itself is not taken as a result. The traversal then visits a subset of the
-/// unhinted traversal's nodes in the same order, and every node holding the first closest point is
-/// still visited (its lower bound is at most that distance, which is below the tightened bound), so
-/// the result is bit-for-bit the unhinted one: same point, ties included.
+/// `hint` (a tree point index, or -1) only tightens the starting bound to just above the hint's
+/// distance (kHintBoundMargin); the hint itself is not taken as a result. The traversal then visits
+/// a subset of the unhinted traversal's nodes in the same order: every subtree it skips has a lower
+/// bound above the tightened bound, so holds no point as close as the hint, and every node holding
+/// the first closest point is still visited (its lower bound is at most that distance plus the lower
+/// bound's rounding, below the tightened bound). So the result is bit-for-bit the unhinted one (the
+/// OpenCL kernel's, which has no hint): same point, ties included.
 inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& best, std::int32_t& best_point,
                           std::int32_t hint = -1) {
   const KdPoint* points = tree.points().data();
   if (hint >= 0) {
-    const float hint_bound = std::nextafter(squared_distance(points[hint], q), std::numeric_limits<float>::infinity());
+    const float hint_bound = std::nextafter(squared_distance(points[hint], q) * (1.0f + kHintBoundMargin),
+                                            std::numeric_limits<float>::infinity());
     if (hint_bound < best) best = hint_bound;
   }
   struct Pending {
