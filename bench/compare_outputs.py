@@ -8,7 +8,7 @@ usage: bench/compare_outputs.py BASE_MINEMAP CANDIDATE_MINEMAP [--work DIR] [--c
 Each case (a survey and the options of `minemap map`, or `minemap watch` fed the same survey) runs
 once per program into WORK/<case>/{base,candidate}. Every file the base wrote must exist in the
 candidate's folder with the same bytes; report.json is compared as JSON, where `timings_s` (wall
-clocks) is left out, as are watch.json's match_s and times_s; a field only the candidate writes is listed as new, not as a difference.
+clocks) and `version` are left out, minemap.log without its version line and with wall times blanked, as are watch.json's match_s and times_s; a field only the candidate writes is listed as new, not as a difference.
 A file only the candidate writes is listed as new; report.json's four settings that became options
 (REPLACED) are listed as replaced. The surveys: the simulated drive (24 scans) in
 the three presets on the CPU and on OpenCL (PoCL here), a loop survey (loops closed), the real
@@ -66,7 +66,7 @@ def compare_json(base, candidate, path=""):
     differences, new = [], []
     if isinstance(base, dict) and isinstance(candidate, dict):
         for key in base:
-            if (path == "" and key == "timings_s") or key in WALL_CLOCK_KEYS:
+            if (path == "" and key in ("timings_s", "version")) or key in WALL_CLOCK_KEYS:
                 continue
             where = f"{path}.{key}" if path else key
             if key not in candidate:
@@ -89,6 +89,12 @@ def compare_json(base, candidate, path=""):
     if base != candidate:
         differences.append(f"{path}: {json.dumps(base)[:80]} != {json.dumps(candidate)[:80]}")
     return differences, new
+
+
+def normalised_log(text):
+    """minemap.log without its first line (the build's version) and with wall times blanked."""
+    lines = text.splitlines()[1:]
+    return [re.sub(r"\d+(\.\d+)? s\b", "T s", line) for line in lines]
 
 
 def run(program, args, cwd):
@@ -121,9 +127,13 @@ def main():
         shutil.rmtree(folder, ignore_errors=True)
         codes = {}
         for label, program in (("base", base), ("candidate", candidate)):
-            out = folder / label
+            # Both write to the same path (it is in report.json's command line and minemap.log),
+            # then the folder is renamed.
+            out = folder / "out"
             result = run(program, [*map_args, "--out", str(out)], work)
             codes[label] = result.returncode
+            if out.exists():
+                out.rename(folder / label)
         problems, new = [], []
         if codes["base"] != codes["candidate"]:
             problems.append(f"exit {codes['base']} != {codes['candidate']}")
@@ -134,6 +144,9 @@ def main():
             b, c = folder / "base" / rel, folder / "candidate" / rel
             if not c.exists():
                 problems.append(f"{rel}: missing in the candidate")
+            elif rel.name == "minemap.log":
+                if normalised_log(b.read_text()) != normalised_log(c.read_text()):
+                    problems.append(f"{rel}: lines differ (beyond the version and wall times)")
             elif rel.name in ("report.json", "watch.json"):
                 d, n = compare_json(json.loads(b.read_text()), json.loads(c.read_text()))
                 problems += [f"{rel}: {x}" for x in d]

@@ -21,8 +21,7 @@ then scores both with bench/trajectory_errors.py against the reference, poses pa
 RPE per step (evo_rpe --delta 1 --delta_unit f), and writes JSON (--out) and a Markdown table
 (--md, default the JSON's path with .md).
 
-Sequences (--sequences, comma-separated; the sim-* ones are skipped, with a note, while
-`minemap simulate` has no --sensor):
+Sequences (--sequences, comma-separated):
   kitti07          shared/data/kitti07_sequence: 5 real KITTI 07 HDL-64 scans (NNNNNN/points.bin,
                    downsampled, 3-12 m apart), reference graph.txt
   kitti07-pcd      the same scans written as binary PCD (x y z intensity time ring; every point of a

@@ -200,6 +200,8 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
          "bound (0 = off)");
   number(g, "--metascan-margin-cm", mapping.metascan_margin_cm,
          "Metascan: model points within the scan's box grown by the pair bound and this");
+  number(g, "--local-map-cell-cm", mapping.motion.local_map_cell_cm,
+         "A moving sensor's sweeps: the metascan keeps one point per cell of this size, the nearest scan's (0 = all)");
 }
 
 void MapOptionTable::declare_relaxation(MappingSettings& mapping) {

@@ -3,12 +3,76 @@
 #include <tbb/parallel_for.h>
 
 #include <array>
+#include <cmath>
+#include <cstdint>
 
 namespace minemap::detail {
+namespace {
+
+/// A cell's key: its three integer coordinates, 21 bits each (+-10 km at 1 cm cells, in the
+/// metascan's frame near the scan).
+std::uint64_t cell_key(const Eigen::Vector3f& p, double scale) {
+  const auto bits = [&](float v) {
+    return static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(double(v) * scale)) & 0x1FFFFF);
+  };
+  return bits(p.x()) | bits(p.y()) << 21 | bits(p.z()) << 42;
+}
+
+/// Which cells are taken: open addressing over a power-of-two table at most half full, so that
+/// thinning a metascan of a million points costs milliseconds (a node-based set costs tens).
+class CellSet {
+ public:
+  explicit CellSet(std::size_t most) {
+    std::size_t size = 16;
+    while (size < 2 * most) size *= 2;
+    slots_.assign(size, kEmpty);
+  }
+  /// true when the cell was not taken before.
+  bool insert(std::uint64_t key) {
+    const std::size_t mask = slots_.size() - 1;
+    for (std::size_t at = (key * 0x9E3779B97F4A7C15ull) >> 20 & mask;; at = (at + 1) & mask) {
+      if (slots_[at] == key) return false;
+      if (slots_[at] == kEmpty) {
+        slots_[at] = key;
+        return true;
+      }
+    }
+  }
+
+ private:
+  static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};  // no key has its top bit set
+  std::vector<std::uint64_t> slots_;
+};
+
+}  // namespace
+
+std::vector<Eigen::Vector3f> concatenated(const std::vector<std::vector<Eigen::Vector3f>>& parts) {
+  std::size_t total = 0;
+  for (const auto& part : parts) total += part.size();
+  std::vector<Eigen::Vector3f> points;
+  points.reserve(total);
+  for (const auto& part : parts) points.insert(points.end(), part.begin(), part.end());
+  return points;
+}
+
+std::vector<Eigen::Vector3f> first_point_per_cell(const std::vector<std::vector<Eigen::Vector3f>>& parts,
+                                                  double cell_cm) {
+  std::size_t total = 0;
+  for (const auto& part : parts) total += part.size();
+  CellSet taken(total);
+  const double scale = 1.0 / cell_cm;
+  std::vector<Eigen::Vector3f> points;
+  for (const auto& part : parts) {
+    for (const Eigen::Vector3f& p : part) {
+      if (taken.insert(cell_key(p, scale))) points.push_back(p);
+    }
+  }
+  return points;
+}
 
 std::shared_ptr<const PreparedCloud> LocalMap::metascan(const SurveyState& state, std::size_t i, const Pose& standing,
                                                         const Pose& frame, const Pose& at, double grow_cm,
-                                                        Scope scope) const {
+                                                        Scope scope, double thin_cm) const {
   const bool whole_map = scope == Scope::kWholeMap;
   std::vector<std::size_t> near =
       state.nearby(i, standing, whole_map ? state.size() : i, double(settings_.icp.max_pair_dist_cm));
@@ -16,12 +80,12 @@ std::shared_ptr<const PreparedCloud> LocalMap::metascan(const SurveyState& state
     const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
     std::erase_if(near, [&](std::size_t j) { return j + gap < i; });
   }
-  return union_of(state, i, near, frame, at, grow_cm);
+  return union_of(state, i, near, frame, at, grow_cm, thin_cm);
 }
 
 std::shared_ptr<const PreparedCloud> LocalMap::union_of(const SurveyState& state, std::size_t i,
                                                         const std::vector<std::size_t>& near, const Pose& frame,
-                                                        const Pose& at, double grow_cm) const {
+                                                        const Pose& at, double grow_cm, double thin_cm) const {
   const Pose frame_inverse = rigid_inverse(frame);
   const KdTree& own = state.prepared(i).cloud->tree();
   const std::array<Eigen::Vector3f, 2> corners = {own.bounds_min(), own.bounds_max()};
@@ -39,12 +103,7 @@ std::shared_ptr<const PreparedCloud> LocalMap::union_of(const SurveyState& state
       parts[k].push_back(q.cast<float>());
     }
   });
-  std::size_t total = 0;
-  for (const auto& part : parts) total += part.size();
-  std::vector<Eigen::Vector3f> union_points;
-  union_points.reserve(total);
-  for (const auto& part : parts) union_points.insert(union_points.end(), part.begin(), part.end());
-  return backend_.prepare(std::move(union_points), settings_.tree);
+  return backend_.prepare(thin_cm > 0.0 ? first_point_per_cell(parts, thin_cm) : concatenated(parts), settings_.tree);
 }
 
 }  // namespace minemap::detail

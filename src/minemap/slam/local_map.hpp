@@ -17,6 +17,16 @@
 
 namespace minemap::detail {
 
+/// The points of `parts`, in order, one after the other.
+std::vector<Eigen::Vector3f> concatenated(const std::vector<std::vector<Eigen::Vector3f>>& parts);
+
+/// The points of `parts`, in order, keeping only the first point in each cube of `cell_cm` (cubes
+/// [k c, (k+1) c) on each axis): a moving sensor's local map (MotionSettings::local_map_cell_cm),
+/// where the parts are the nearest scan's first. Cells are told apart within 2^20 cells of the
+/// origin on each axis (105 km at 10 cm); a metascan sits in the previous scan's frame, near it.
+std::vector<Eigen::Vector3f> first_point_per_cell(const std::vector<std::vector<Eigen::Vector3f>>& parts,
+                                                  double cell_cm);
+
 class LocalMap {
  public:
   /// Which scans a metascan takes: the registered ones before the scan (while matching; with loops
@@ -28,14 +38,18 @@ class LocalMap {
 
   /// The metascan of scan i: the scans near it where it stands (`standing`, SurveyState::nearby),
   /// in the frame `frame`, holding their model points within its box at `at` grown by `grow_cm`.
+  /// thin_cm > 0: at most one point in each cell of that size (the nearest scan's), as a moving
+  /// sensor's local map (MotionSettings::local_map_cell_cm).
   std::shared_ptr<const PreparedCloud> metascan(const SurveyState& state, std::size_t i, const Pose& standing,
-                                                const Pose& frame, const Pose& at, double grow_cm, Scope scope) const;
+                                                const Pose& frame, const Pose& at, double grow_cm, Scope scope,
+                                                double thin_cm = 0.0) const;
 
   /// One kd-tree, in the frame `frame`, of the model points of scans `near` that scan i can reach
-  /// at `at`: inside its box grown by `grow_cm`. Concatenated in the order of `near`.
+  /// at `at`: inside its box grown by `grow_cm`. Concatenated in the order of `near`; thin_cm > 0
+  /// keeps the first point of each cell of that size in that order.
   std::shared_ptr<const PreparedCloud> union_of(const SurveyState& state, std::size_t i,
                                                 const std::vector<std::size_t>& near, const Pose& frame,
-                                                const Pose& at, double grow_cm) const;
+                                                const Pose& at, double grow_cm, double thin_cm = 0.0) const;
 
  private:
   const MappingSettings& settings_;

@@ -131,6 +131,9 @@ void MotionSettings::validate() const {
   }
   if (adaptive_bound_window < 1) throw std::invalid_argument("the adaptive bound's window must be >= 1 scan");
   if (!(max_sweep_s > 0.0)) throw std::invalid_argument("the longest sweep must be > 0 s");
+  if (!(local_map_cell_cm >= 0.0) || !std::isfinite(local_map_cell_cm)) {
+    throw std::invalid_argument("the local map's cell must be a finite length >= 0 cm");
+  }
 }
 
 void LoopClosureSettings::validate() const {

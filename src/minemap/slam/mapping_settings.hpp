@@ -90,6 +90,10 @@ struct MotionSettings {
   /// differs from the predicted one by more than this (at the sweep's end)...
   double refine_min_change_cm = 1.0;
   double refine_min_change_deg = 0.1;  ///< ...or turns more than this
+  /// A sweep's metascan keeps at most one model point in each cell of this size (the nearest
+  /// scan's): a moving sensor's scans overlap tens of times, and a tree over all their points costs
+  /// more to build than the match it serves (KISS-ICP's voxel map thins the same way). 0: all.
+  double local_map_cell_cm = 10.0;
   /// A match that needed a retry and moved the scan's points more than this many times the RMS of
   /// the recent prediction errors (with at least confirm_min_history of them) is not trusted on its
   /// point statistics alone: a second match from the other model's start (standing still, or the

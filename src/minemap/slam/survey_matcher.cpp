@@ -1,6 +1,7 @@
 #include "minemap/slam/survey_matcher.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 namespace minemap::detail {
@@ -113,10 +114,22 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, flo
   // In the frame of scan i-1, so the metascan's float coordinates stay small wherever the survey
   // is; the metascans made for each bound live until the scan is registered.
   const Pose frame = state_.pose(i - 1);
+  const PreparedScan& scan = state_.prepared(i);
+  const double thin_cm = scan.sweep_s > 0.0 ? settings_.motion.local_map_cell_cm : 0.0;
   std::vector<std::shared_ptr<const PreparedCloud>> metascans;
-  return registration_.register_scan(state_.prepared(i), start, [&](float bound_cm, const Pose& standing) {
+  return registration_.register_scan(scan, start, [&](float bound_cm, const Pose& standing) {
+    LastMetascan& last = last_metascan_;
+    if (thin_cm > 0.0 && last.cloud && last.scan == i && last.bound_cm == bound_cm && last.frame == frame && standing == start) {
+      const KdTree& own = scan.cloud->tree();
+      const double radius_cm = std::max(own.bounds_min().norm(), own.bounds_max().norm());
+      const Pose moved = rigid_inverse(last.at) * start;
+      const double shift_cm = translation_norm(moved) + rotation_angle_deg(moved) * (M_PI / 180.0) * radius_cm;
+      if (shift_cm < 0.5 * settings_.metascan_margin_cm) return std::vector<WorldModel>{{last.cloud.get(), frame}};
+    }
     const double grow_cm = double(bound_cm) + settings_.metascan_margin_cm;
-    metascans.push_back(local_map_.metascan(state_, i, standing, frame, start, grow_cm, LocalMap::Scope::kEarlier));
+    metascans.push_back(
+        local_map_.metascan(state_, i, standing, frame, start, grow_cm, LocalMap::Scope::kEarlier, thin_cm));
+    if (thin_cm > 0.0 && standing == start) last = {i, bound_cm, frame, start, metascans.back()};
     return std::vector<WorldModel>{{metascans.back().get(), frame}};
   }, start_bound_cm);
 }
@@ -233,6 +246,7 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
       relax(i, per_scan > 0 ? per_scan : 4 * static_cast<int>(i + 1));
     });
   }
+  last_metascan_ = {};
   state_.set_match_time(i, arrived.seconds());
   control_.report(i + 1, to_string(settings_.mode));
 }

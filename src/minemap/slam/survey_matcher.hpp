@@ -95,6 +95,17 @@ class SurveyMatcher {
   /// The first sweep as read, kept until scan 1 is registered: then the step between them says how
   /// to deskew it.
   std::optional<Scan> first_sweep_;
+  /// The metascan scan i's last incremental match took, at one bound: a sweep's second match
+  /// (refine_deskew), from a pose a few centimetres from the first's start, takes the same one when
+  /// the scan's box moved less than half the metascan's margin (metascan_margin_cm), instead of a
+  /// new tree. Dropped when the scan is done.
+  struct LastMetascan {
+    std::size_t scan = 0;
+    float bound_cm = 0.0f;
+    Pose frame = Pose::Identity(), at = Pose::Identity();
+    std::shared_ptr<const PreparedCloud> cloud;
+  };
+  mutable LastMetascan last_metascan_;
 };
 
 }  // namespace minemap::detail
