@@ -157,8 +157,12 @@ TEST(CommandLine, HelpTextsPrintTheirDefaultsFromTheSettings) {
   EXPECT_NE(help["--no-loop-closing"].find("12+ scans"), std::string::npos) << help["--no-loop-closing"];
   // A preset that changes a default changes the option's default with it.
   for (const cli::OptionInfo& option : cli::map_options(Preset::kPaper)) {
-    if (option.name == "--refine-fraction") EXPECT_EQ(option.default_value, "0");
-    if (option.name == "--reduction") EXPECT_EQ(option.default_value, "slices");
+    if (option.name == "--refine-fraction") {
+      EXPECT_EQ(option.default_value, "0");
+    }
+    if (option.name == "--reduction") {
+      EXPECT_EQ(option.default_value, "slices");
+    }
   }
 }
 

@@ -158,6 +158,8 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                      {"doubt", loop.doubt},
                      {"gap_before", loop.gap_before_cm * unit_per_cm},
                      {"gap_before_deg", loop.gap_before_deg},
+                     {"path", loop.path_cm * unit_per_cm},
+                     {"misclosure_percent", loop.path_cm > 0.0 ? 100.0 * loop.gap_before_cm / loop.path_cm : 0.0},
                      {"gap_after", loop.gap_after_cm * unit_per_cm},
                      {"gap_after_deg", loop.gap_after_deg}});
   }

@@ -1,6 +1,7 @@
 #include "minemap/slam/loop_closing.hpp"
 
 #include <algorithm>
+#include <cstdio>
 
 #include "minemap/registration/match_information.hpp"
 
@@ -53,7 +54,7 @@ std::vector<std::vector<LoopClosing::Candidate>> LoopClosing::returns(const Surv
 }
 
 std::optional<Pose> LoopClosing::loop_match(const SurveyState& state, std::size_t i, std::size_t j,
-                                            std::string& doubt) const {
+                                            std::string& doubt, bool& converged) const {
   const std::size_t model[] = {i};
   const std::vector<WorldModel> models = state.models_of(model);
   const Pose start = state.pose(j);
@@ -68,6 +69,7 @@ std::optional<Pose> LoopClosing::loop_match(const SurveyState& state, std::size_
     }
     if (!match.health.doubtful()) return match.fine->world_from_data;
     doubt = match.health.doubt;
+    converged = true;
   }
   return std::nullopt;
 }
@@ -100,6 +102,30 @@ Matrix6d LoopClosing::edge_information(const SurveyState& state, std::size_t fro
   return geometry * (3.0 * t / translation_trace) + Matrix6d(floor.asDiagonal());
 }
 
+void LoopClosing::doubt_misclosure(SurveyState& state, const LoopClosure& loop) const {
+  const double most = settings_.loops.max_misclosure_fraction;
+  if (!(most > 0.0) || !(loop.gap_before_cm > most * loop.path_cm)) return;
+  RegistrationHealth health = state.health(loop.to);
+  if (!health.judged || health.doubtful()) return;
+  char text[360];
+  std::snprintf(text, sizeof text,
+                "the loop from %s closed %.0f cm / %.1f deg apart after %.1f m of drive (%.2g %%, more than %.2g %%): "
+                "the scans between were that far off, and the relaxation only spread it; check them",
+                state.outcome(loop.from).name.c_str(), loop.gap_before_cm, loop.gap_before_deg, loop.path_cm / 100.0,
+                100.0 * loop.gap_before_cm / loop.path_cm, 100.0 * most);
+  health.doubt = text;
+  state.judged(loop.to, std::move(health));
+}
+
+void LoopClosing::doubt_unclosed_return(SurveyState& state, const LoopClosure& loop) const {
+  RegistrationHealth health = state.health(loop.to);
+  if (!health.judged || health.doubtful()) return;
+  health.doubt = "the drive came back near " + state.outcome(loop.from).name +
+                 ", and no loop match there was trusted (" + loop.doubt +
+                 "): the drift over the loop stays in the map, unmeasured; check it, or give closer starts";
+  state.judged(loop.to, std::move(health));
+}
+
 void LoopClosing::judge_again(SurveyState& state, const RunControl& control) const {
   // The relaxation moved every scan: each is judged again where it ended, against the map of all
   // scans near it. A scan that looked doubtful against a few recent scans (a corner that sees
@@ -127,15 +153,22 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
   if (n <= static_cast<std::size_t>(settings_.loops.min_scan_gap)) return loops;
   std::vector<Pose> poses(n);
   for (std::size_t k = 0; k < n; ++k) poses[k] = state.pose(k);
+  std::vector<double> driven_cm(n, 0.0);  // along the scan positions as the chain left them
+  for (std::size_t k = 1; k < n; ++k) driven_cm[k] = driven_cm[k - 1] + translation_norm(rigid_inverse(poses[k - 1]) * poses[k]);
   std::vector<PoseGraphEdge> edges = chain(state);
   const std::size_t chain_edges = edges.size();
+  std::vector<LoopClosure> unclosed_returns;
+  std::optional<LoopClosure> unclosed;
   for (const std::vector<Candidate>& candidates : returns(state)) {
     for (const Candidate& candidate : candidates) {
       if (control.stop_requested()) return loops;
       LoopClosure loop;
       loop.from = candidate.from;
       loop.to = candidate.to;
-      const std::optional<Pose> matched = loop_match(state, loop.from, loop.to, loop.doubt);
+      loop.path_cm = driven_cm[loop.to] - driven_cm[loop.from];
+      bool converged = false;
+      const std::optional<Pose> matched = loop_match(state, loop.from, loop.to, loop.doubt, converged);
+      if (!matched && converged && !unclosed) unclosed = loop;
       if (matched) {
         loop.closed = true;
         const Pose moved = rigid_inverse(poses[loop.to]) * *matched;
@@ -148,8 +181,18 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
       loops.push_back(loop);
       if (loop.closed) break;
     }
+    if (unclosed && !loops.back().closed) unclosed_returns.push_back(*unclosed);
+    unclosed.reset();
   }
-  if (edges.size() == chain_edges) return loops;
+  // After the relaxation (if any) and its judging: a return whose matches converged but none was
+  // trusted leaves its drift in the map, and the run says so.
+  const auto doubt_unclosed = [&] {
+    for (const LoopClosure& loop : unclosed_returns) doubt_unclosed_return(state, loop);
+  };
+  if (edges.size() == chain_edges) {
+    doubt_unclosed();
+    return loops;
+  }
   const PoseGraphResult relaxed = optimise_pose_graph(poses, edges, 0, settings_.loops.graph);
   for (std::size_t k = 1; k < n; ++k) state.place(k, relaxed.poses[k]);
   judge_again(state, control);
@@ -160,7 +203,9 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
     const Pose left = rigid_inverse(relaxed.poses[loop.to]) * wanted;
     loop.gap_after_cm = translation_norm(left);
     loop.gap_after_deg = rotation_angle_deg(left);
+    doubt_misclosure(state, loop);
   }
+  doubt_unclosed();
   return loops;
 }
 

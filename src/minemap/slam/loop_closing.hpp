@@ -8,7 +8,9 @@
 //  3. one pose graph: the chain of scan-to-scan steps as matched plus the trusted loop edges, each
 //     weighted by its match's geometry (point-to-plane information, registration/match_information.hpp);
 //  4. apply the relaxed poses, and judge every scan again where it ended, against the whole map
-//     near it.
+//     near it; a loop that closed more than loops.max_misclosure_fraction of its drive apart makes
+//     its later scan doubtful, and so does a return where loop matches converged but none was
+//     trusted (the drift stays in the map: "never silently wrong").
 //
 // Thread-safety: uses the backend, one thread at a time.
 #include <optional>
@@ -43,13 +45,21 @@ class LoopClosing {
   std::vector<std::vector<Candidate>> returns(const SurveyState& state) const;
   /// Step 2: a trusted match of scan j against scan i alone, from j's current pose, at each bound of
   /// loops.bound_factors in turn. Empty when none is trusted; `doubt` then says why.
-  std::optional<Pose> loop_match(const SurveyState& state, std::size_t i, std::size_t j, std::string& doubt) const;
+  /// `converged`: some bound's match converged and was judged doubtful (not: no overlap).
+  std::optional<Pose> loop_match(const SurveyState& state, std::size_t i, std::size_t j, std::string& doubt,
+                                 bool& converged) const;
+  /// A return none of whose candidates closed, where a match converged but was not trusted: the
+  /// map's drift over the loop stays, unmeasured; the return's scan is judged doubtful.
+  void doubt_unclosed_return(SurveyState& state, const LoopClosure& loop) const;
   /// The chain of scan-to-scan steps as the scans stand (step 3's first edges).
   std::vector<PoseGraphEdge> chain(const SurveyState& state) const;
   /// The information of the edge `from` -> `to` (`to` at `to_pose`), from the geometry of their pairs.
   Matrix6d edge_information(const SurveyState& state, std::size_t from, std::size_t to, const Pose& to_pose) const;
   /// Whether edge information comes from geometry for an edge ending at scan k (its planes exist).
   bool geometric(const SurveyState& state, std::size_t k) const;
+  /// A closed loop whose gap before the relaxation was more than loops.max_misclosure_fraction of
+  /// its drive: its later scan is judged doubtful (the run then says so, exit 13).
+  void doubt_misclosure(SurveyState& state, const LoopClosure& loop) const;
   /// Step 4's judging of every matched scan at its final pose against the whole map near it.
   void judge_again(SurveyState& state, const RunControl& control) const;
 

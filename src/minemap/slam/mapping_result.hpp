@@ -57,6 +57,7 @@ struct LoopClosure {
   bool closed = false;              ///< a trusted match joined them (an edge of the relaxation)
   std::string doubt;                ///< when not closed: why
   double gap_before_cm = 0, gap_before_deg = 0;  ///< where the match put `to`, against its pose before
+  double path_cm = 0;  ///< the drive from `from` to `to` along the scan positions, before the relaxation
   double gap_after_cm = 0, gap_after_deg = 0;    ///< the same after the relaxation
 };
 

@@ -147,6 +147,9 @@ void LoopClosureSettings::validate() const {
   for (const float factor : bound_factors) {
     if (!(factor >= 1.0f) || !std::isfinite(factor)) throw std::invalid_argument("loop bound factors must be >= 1");
   }
+  if (!(max_misclosure_fraction >= 0.0) || !std::isfinite(max_misclosure_fraction)) {
+    throw std::invalid_argument("a loop's largest misclosure must be a finite fraction >= 0 of its drive");
+  }
   if (!(graph.translation_sigma_cm > 0.0) || !(graph.rotation_sigma_rad > 0.0) || graph.max_iterations < 1) {
     throw std::invalid_argument("the pose graph needs sigmas > 0 and at least one iteration");
   }
