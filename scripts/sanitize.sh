@@ -22,7 +22,11 @@
 # run here: MappingSimulatedMine.TheBoundedRelaxationIsAsAccurateAsThePapersQueue (the bounded and
 # the paper's queue: MappingDeterminism, Presets/*), HealthRealData.CarScans... (the health checks
 # and retries: HealthSurveys.*, Health.*), MappingLoops.ALoopSurveyIsClosedAndItsEndsAgree (loop
-# closing: Cli.ALoopSurveyIsClosedAndReported, PoseGraph.*).
+# closing: Cli.ALoopSurveyIsClosedAndReported, PoseGraph.*). So do two moving-sensor drives (5 and
+# 23 s in Release): MovingMapping.SpinningAtTenMetresPerSecondWithoutOdometry (the motion model,
+# deskew and local map run here in MovingCli.MapReadsTheSweepsAndAgreesWithTheTruthFrame) and
+# MappingLoops.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot (the loop verdicts run here in
+# MappingLoops.AMisclosureBeyondTheLimitMakesTheLoopsScanDoubtful).
 # Also out, to keep CI under 30 minutes (each 17-46 s under a sanitizer), their code covered there
 # by smaller tests: LiveMapper.* (the live matcher against map_survey in three modes: its code runs
 # in Cli.WatchEndsAsMapOfTheSameFolderAndResumes), Cli.UnmarkedUosFilesGetTheirSlicesFromTheScanner-
@@ -66,7 +70,7 @@ cc="${cxx/clang++/clang}"; cc="${cc/g++/gcc}"
 jobs="${SANITIZE_JOBS:-$(nproc)}"
 timeout="${SANITIZE_TIMEOUT:-900}"
 supp="$repo_root/tests/sanitizers"
-heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBound|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|LiveMapper\..*|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package)$'
+heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBound|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|LiveMapper\..*|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package)$'
 # TSan only: runs of the single-threaded parsers through the CLI (ASan checks them).
 heavy_thread='^(BadInput\.MapCommandGivesEachCaseItsExitCodeAndLeavesTheOutputFolder)$'
 
