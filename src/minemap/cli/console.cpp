@@ -160,7 +160,7 @@ void print_loops(const MapOptions& options, const MappingResult& result) {
           "loop closed: %s with %s: %.1f cm / %.2f deg apart before the relaxation (%.2f %% of %.1f m driven), "
           "%.1f cm / %.2f deg after\n",
           to.c_str(), from.c_str(), loop.gap_before_cm, loop.gap_before_deg,
-          loop.path_cm > 0.0 ? 100.0 * loop.gap_before_cm / loop.path_cm : 0.0, loop.path_cm / 100.0,
+          100.0 * loop.misclosure_fraction(), loop.path_cm / 100.0,
           loop.gap_after_cm, loop.gap_after_deg);
     } else if (!loop.closed && !any_closed) {
       std::fprintf(stderr,

@@ -159,7 +159,7 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                      {"gap_before", loop.gap_before_cm * unit_per_cm},
                      {"gap_before_deg", loop.gap_before_deg},
                      {"path", loop.path_cm * unit_per_cm},
-                     {"misclosure_percent", loop.path_cm > 0.0 ? 100.0 * loop.gap_before_cm / loop.path_cm : 0.0},
+                     {"misclosure_percent", 100.0 * loop.misclosure_fraction()},
                      {"gap_after", loop.gap_after_cm * unit_per_cm},
                      {"gap_after_deg", loop.gap_after_deg}});
   }

@@ -6,6 +6,17 @@
 #include "minemap/registration/match_information.hpp"
 
 namespace minemap::detail {
+namespace {
+
+/// The drive from scan 0 to each scan, along the scan positions as they stand (cm).
+std::vector<double> driven_cm(const SurveyState& state) {
+  const auto position = [&](std::size_t k) { return state.pose(k).block<3, 1>(0, 3); };
+  std::vector<double> driven(state.size(), 0.0);
+  for (std::size_t k = 1; k < state.size(); ++k) driven[k] = driven[k - 1] + (position(k) - position(k - 1)).norm();
+  return driven;
+}
+
+}  // namespace
 
 bool LoopClosing::geometric(const SurveyState& state, std::size_t k) const {
   return settings_.loops.information_from_geometry && state.prepared(k).planes.has_value();
@@ -31,14 +42,13 @@ std::vector<std::vector<LoopClosing::Candidate>> LoopClosing::returns(const Surv
   const std::size_t n = state.size();
   const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
   const auto position = [&](std::size_t k) { return state.pose(k).block<3, 1>(0, 3); };
-  std::vector<double> driven_cm(n, 0.0);  // along the scan positions, from scan 0
-  for (std::size_t k = 1; k < n; ++k) driven_cm[k] = driven_cm[k - 1] + (position(k) - position(k - 1)).norm();
+  const std::vector<double> driven = driven_cm(state);
   std::vector<std::vector<Candidate>> found;
   for (std::size_t j = gap; j < n; ++j) {
     if (!state.registered(j)) continue;
     Candidate best{n, j, settings_.loops.max_distance_cm};
     for (std::size_t i = 0; i + gap <= j; ++i) {
-      if (!state.registered(i) || driven_cm[j] - driven_cm[i] < settings_.loops.min_path_cm) continue;
+      if (!state.registered(i) || driven[j] - driven[i] < settings_.loops.min_path_cm) continue;
       const double d = (position(i) - position(j)).norm();
       if (d < best.distance_cm) best = {i, j, d};
     }
@@ -104,7 +114,7 @@ Matrix6d LoopClosing::edge_information(const SurveyState& state, std::size_t fro
 
 void LoopClosing::doubt_misclosure(SurveyState& state, const LoopClosure& loop) const {
   const double most = settings_.loops.max_misclosure_fraction;
-  if (!(most > 0.0) || !(loop.gap_before_cm > most * loop.path_cm)) return;
+  if (!(most > 0.0) || !(loop.misclosure_fraction() > most)) return;
   RegistrationHealth health = state.health(loop.to);
   if (!health.judged || health.doubtful()) return;
   char text[360];
@@ -112,7 +122,7 @@ void LoopClosing::doubt_misclosure(SurveyState& state, const LoopClosure& loop) 
                 "the loop from %s closed %.0f cm / %.1f deg apart after %.1f m of drive (%.2g %%, more than %.2g %%): "
                 "the scans between were that far off, and the relaxation only spread it; check them",
                 state.outcome(loop.from).name.c_str(), loop.gap_before_cm, loop.gap_before_deg, loop.path_cm / 100.0,
-                100.0 * loop.gap_before_cm / loop.path_cm, 100.0 * most);
+                100.0 * loop.misclosure_fraction(), 100.0 * most);
   health.doubt = text;
   state.judged(loop.to, std::move(health));
 }
@@ -153,19 +163,18 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
   if (n <= static_cast<std::size_t>(settings_.loops.min_scan_gap)) return loops;
   std::vector<Pose> poses(n);
   for (std::size_t k = 0; k < n; ++k) poses[k] = state.pose(k);
-  std::vector<double> driven_cm(n, 0.0);  // along the scan positions as the chain left them
-  for (std::size_t k = 1; k < n; ++k) driven_cm[k] = driven_cm[k - 1] + translation_norm(rigid_inverse(poses[k - 1]) * poses[k]);
+  const std::vector<double> driven = driven_cm(state);  // as the chain left the scans
   std::vector<PoseGraphEdge> edges = chain(state);
   const std::size_t chain_edges = edges.size();
-  std::vector<LoopClosure> unclosed_returns;
-  std::optional<LoopClosure> unclosed;
+  std::vector<LoopClosure> unclosed_returns;  // the first converged, untrusted candidate of each
   for (const std::vector<Candidate>& candidates : returns(state)) {
+    std::optional<LoopClosure> unclosed;
     for (const Candidate& candidate : candidates) {
       if (control.stop_requested()) return loops;
       LoopClosure loop;
       loop.from = candidate.from;
       loop.to = candidate.to;
-      loop.path_cm = driven_cm[loop.to] - driven_cm[loop.from];
+      loop.path_cm = driven[loop.to] - driven[loop.from];
       bool converged = false;
       const std::optional<Pose> matched = loop_match(state, loop.from, loop.to, loop.doubt, converged);
       if (!matched && converged && !unclosed) unclosed = loop;
@@ -182,15 +191,11 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
       if (loop.closed) break;
     }
     if (unclosed && !loops.back().closed) unclosed_returns.push_back(*unclosed);
-    unclosed.reset();
   }
   // After the relaxation (if any) and its judging: a return whose matches converged but none was
   // trusted leaves its drift in the map, and the run says so.
-  const auto doubt_unclosed = [&] {
-    for (const LoopClosure& loop : unclosed_returns) doubt_unclosed_return(state, loop);
-  };
   if (edges.size() == chain_edges) {
-    doubt_unclosed();
+    for (const LoopClosure& loop : unclosed_returns) doubt_unclosed_return(state, loop);
     return loops;
   }
   const PoseGraphResult relaxed = optimise_pose_graph(poses, edges, 0, settings_.loops.graph);
@@ -205,7 +210,7 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
     loop.gap_after_deg = rotation_angle_deg(left);
     doubt_misclosure(state, loop);
   }
-  doubt_unclosed();
+  for (const LoopClosure& loop : unclosed_returns) doubt_unclosed_return(state, loop);
   return loops;
 }
 

@@ -59,6 +59,8 @@ struct LoopClosure {
   double gap_before_cm = 0, gap_before_deg = 0;  ///< where the match put `to`, against its pose before
   double path_cm = 0;  ///< the drive from `from` to `to` along the scan positions, before the relaxation
   double gap_after_cm = 0, gap_after_deg = 0;    ///< the same after the relaxation
+  /// The gap before the relaxation over the drive between (0 when there was no drive).
+  double misclosure_fraction() const { return path_cm > 0.0 ? gap_before_cm / path_cm : 0.0; }
 };
 
 struct MappingResult {

@@ -119,7 +119,8 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, flo
   std::vector<std::shared_ptr<const PreparedCloud>> metascans;
   return registration_.register_scan(scan, start, [&](float bound_cm, const Pose& standing) {
     LastMetascan& last = last_metascan_;
-    if (thin_cm > 0.0 && last.cloud && last.scan == i && last.bound_cm == bound_cm && last.frame == frame && standing == start) {
+    const bool same_match = last.cloud && last.scan == i && last.bound_cm == bound_cm && last.frame == frame;
+    if (thin_cm > 0.0 && same_match && standing == start) {
       const KdTree& own = scan.cloud->tree();
       const double radius_cm = std::max(own.bounds_min().norm(), own.bounds_max().norm());
       const Pose moved = rigid_inverse(last.at) * start;
