@@ -57,6 +57,7 @@ struct MapOptions {
   bool write_unregistered = false;
   bool accept_doubtful = false;
   bool no_retry = false;
+  bool no_recovery = false;
   bool no_loops = false;
   int threads = 0;            ///< worker threads (0: all cores)
   std::string opencl_device;  ///< a substring of "platform / device" (empty: MINEMAP_OPENCL_DEVICE)

@@ -172,7 +172,7 @@ void print_loops(const MapOptions& options, const MappingResult& result) {
 }
 
 void print_summary(const MappingResult& result) {
-  std::size_t trusted = 0, retried = 0, doubtful = 0, failed = 0;
+  std::size_t trusted = 0, retried = 0, recovered = 0, doubtful = 0, failed = 0;
   std::vector<std::pair<double, std::size_t>> rms;
   for (std::size_t i = 1; i < result.scans.size(); ++i) {  // scan 0 is the master: never matched
     const ScanOutcome& s = result.scans[i];
@@ -183,10 +183,12 @@ void print_summary(const MappingResult& result) {
     if (s.health.doubtful()) ++doubtful;
     else ++trusted;
     if (s.health.retry_bound_cm > 0.0f) ++retried;
+    if (s.health.recovered_inliers > 0) ++recovered;
     rms.emplace_back(s.last_match.rms_cm, i);
   }
-  say(stdout, "summary: %zu scans: %zu trusted (%zu after a retry at a wider bound), %zu doubtful, %zu not registered",
-      result.scans.size(), trusted, retried, doubtful, failed);
+  say(stdout, "summary: %zu scans: %zu trusted (%zu after a retry at a wider bound", result.scans.size(), trusted, retried);
+  if (recovered > 0) say(stdout, ", %zu recovered without a start", recovered);
+  say(stdout, "), %zu doubtful, %zu not registered", doubtful, failed);
   if (!rms.empty()) {
     std::sort(rms.begin(), rms.end());
     const auto& worst = rms.back();

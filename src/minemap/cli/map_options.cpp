@@ -242,6 +242,13 @@ void MapOptionTable::declare_health(MapOptions& map, MappingSettings& mapping) {
   numbers(g, "--retry-bound-factors", mapping.retry_bound_factors,
           "A doubtful match is tried again from these multiples of the pair bound (comma-separated)");
   number(g, "--max-retry-bound-cm", mapping.max_retry_bound_cm, "No retry (or loop match) starts wider than this");
+  flag(g, "--no-recovery", map.no_recovery,
+       "Sequences without odometry: do not register a doubtful or failed scan again without a start (its FPFH "
+       "features against the local map's, RANSAC), then match it from there");
+  number(g, "--recovery-voxel-cm", mapping.recovery.global.features.voxel_cm,
+         "Recovery: features on one point per cube of this size (normals within 2x, features within 5x)");
+  number(g, "--recovery-reach-cm", mapping.recovery.reach_cm,
+         "Recovery: the local map reaches this far beyond the scan's box at the previous scan's pose");
 }
 
 void MapOptionTable::declare_loops(MapOptions& map, MappingSettings& mapping) {
@@ -294,6 +301,7 @@ void finish_settings(MapCommand& command) {
   if (options.plain_icp) settings.icp.accelerate = false;
   if (options.no_health_check) settings.health.enabled = false;
   if (options.no_retry) settings.retry_bound_factors.clear();
+  if (options.no_recovery) settings.recovery.enabled = false;
   if (options.no_loops) settings.loops.enabled = false;
   if (options.loop_edges_alike) settings.loops.information_from_geometry = false;
   settings.validate();

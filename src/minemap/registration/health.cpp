@@ -81,22 +81,26 @@ RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedClo
                   health.moved_cm, health.moved_cm / reach, double(reach), settings.max_reach);
     health.doubt = text;
     health.out_of_reach = true;
+    health.failed = HealthTest::kReach;
   } else if (health.paired_fraction < settings.min_paired_fraction) {
     std::snprintf(text, sizeof text, "only %.0f%% of its points paired within %g cm (fewer than %.0f%%): little overlap",
                   100.0 * health.paired_fraction, double(bound), 100.0 * settings.min_paired_fraction);
     health.doubt = text;
+    health.failed = HealthTest::kPaired;
   } else if (health.beyond_bound_fraction > settings.max_beyond_bound_fraction) {
     std::snprintf(text, sizeof text,
                   "%.0f%% of its counterparts lie beyond the %g cm pair bound (more than %.0f%%): the surfaces do not "
                   "meet; start closer or widen --max-pair-dist-cm",
                   100.0 * health.beyond_bound_fraction, double(bound), 100.0 * settings.max_beyond_bound_fraction);
     health.doubt = text;
+    health.failed = HealthTest::kBeyondBound;
   } else if (health.edge_fraction > settings.max_edge_fraction) {
     std::snprintf(text, sizeof text,
                   "%.0f%% of its pairs lie in the outer half of the %g cm pair bound (more than %.0f%%): not settled "
                   "onto the surfaces",
                   100.0 * health.edge_fraction, double(bound), 100.0 * settings.max_edge_fraction);
     health.doubt = text;
+    health.failed = HealthTest::kEdge;
   } else if (health.translation_constraint >= 0.0 &&
              health.translation_constraint < settings.min_translation_constraint) {
     const Eigen::Vector3d& d = health.weakest_direction;
@@ -105,6 +109,7 @@ RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedClo
                   "well as the best direction (less than %g): it may have slid along it (a smooth tunnel)",
                   d.x(), d.y(), d.z(), health.translation_constraint, settings.min_translation_constraint);
     health.doubt = text;
+    health.failed = HealthTest::kConstraint;
   }
   return health;
 }

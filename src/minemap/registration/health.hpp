@@ -53,6 +53,9 @@ struct HealthSettings {
   bool operator==(const HealthSettings&) const = default;
 };
 
+/// Which test a doubtful match failed (the first, in the order below).
+enum class HealthTest { kNone, kReach, kPaired, kBeyondBound, kEdge, kConstraint };
+
 /// The figures of one judged match, and the verdict.
 struct RegistrationHealth {
   bool judged = false;             ///< false: not judged (the master scan, an unregistered scan, or judging off)
@@ -69,8 +72,16 @@ struct RegistrationHealth {
   Eigen::Vector3d weakest_direction = Eigen::Vector3d::Zero();  ///< in the data frame (unit; 0: not measured)
   float pair_bound_cm = 0.0f;      ///< the bound it was judged at (the match's own)
   float retry_bound_cm = 0.0f;     ///< > 0: trusted after a retry that started at this wider bound
+  /// > 0: the match from the motion model's start was not trusted; this one started where a
+  /// registration without a start put the scan (MappingSettings::recovery), with this many of its
+  /// feature pairs agreeing. The correction and reach are from the motion model's start.
+  std::size_t recovered_inliers = 0;
   std::string doubt;               ///< empty: trusted; otherwise which test failed, with its figures
   bool out_of_reach = false;       ///< the reach test failed (a good fit does not clear that doubt)
+  HealthTest failed = HealthTest::kNone;  ///< the test that made it doubtful
+  /// Where a doubt was cleared by more than these figures (two independent starts that ended at
+  /// one pose), how: said in report.json and map.html.
+  std::string note;
   /// Judged again at the pose a loop closure's relaxation gave it, against every scan near it (the
   /// fit figures are from then; the correction and reach from its match).
   bool after_loop_closure = false;

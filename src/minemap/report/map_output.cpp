@@ -140,6 +140,9 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                                 {"moved", h.moved_cm * unit_per_cm},
                                 {"pair_bound", h.pair_bound_cm * unit_per_cm},
                                 {"retry_bound", h.retry_bound_cm * unit_per_cm},
+                                {"recovered", h.recovered_inliers > 0},
+                                {"recovery_inliers", h.recovered_inliers},
+                                {"note", h.note},
                                 {"translation_constraint", h.translation_constraint},
                                 {"judged_after_loop_closure", h.after_loop_closure}};
     }
@@ -221,8 +224,15 @@ PersonView person_view(const MappingResult& result, const std::optional<std::vec
     view.point_scans.resize(view.points_cm.size(), static_cast<std::uint32_t>(i));
     // map.html's info box: why a registered scan's match is doubtful, or why an unregistered one
     // failed; for a trusted one that needed a retry, from how wide.
-    std::string note;
-    if (scan.registered && !scan.health.doubtful() && scan.health.retry_bound_cm > 0.0f) {
+    std::string note = scan.health.note;
+    if (note.empty() && scan.registered && !scan.health.doubtful() && scan.health.recovered_inliers > 0) {
+      char text[200];
+      std::snprintf(text, sizeof text,
+                    "trusted after a recovery: the match from the motion model's start was not, so the scan was "
+                    "registered without a start (FPFH features, RANSAC: %zu pairs agreed) and matched from there",
+                    scan.health.recovered_inliers);
+      note = text;
+    } else if (note.empty() && scan.registered && !scan.health.doubtful() && scan.health.retry_bound_cm > 0.0f) {
       char text[160];
       std::snprintf(text, sizeof text,
                     "trusted after a retry from %g cm: the match at the %g cm bound started out of its reach",

@@ -113,6 +113,7 @@ void MappingSettings::validate() const {
   }
   loops.validate();
   motion.validate();
+  recovery.validate();
   health.validate();
   if (reduction == Reduction::kVoxel && (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm))) {
     throw std::invalid_argument("the voxel size must be a finite length > 0 cm");
@@ -123,6 +124,11 @@ void MappingSettings::validate() const {
   if (!(metascan_margin_cm >= 0.0) || !std::isfinite(metascan_margin_cm)) {
     throw std::invalid_argument("the metascan margin must be a finite length >= 0 cm");
   }
+}
+
+void RecoverySettings::validate() const {
+  global.validate();
+  if (!(reach_cm > 0.0) || !std::isfinite(reach_cm)) throw std::invalid_argument("recovery: reach_cm must be > 0");
 }
 
 void MotionSettings::validate() const {

@@ -12,6 +12,7 @@
 #include "minemap/core/name_table.hpp"
 #include "minemap/filter/deskew.hpp"
 #include "minemap/filter/slice_filter.hpp"
+#include "minemap/registration/global_registration.hpp"
 #include "minemap/registration/health.hpp"
 #include "minemap/registration/icp.hpp"
 #include "minemap/search/kdtree.hpp"
@@ -105,6 +106,24 @@ struct MotionSettings {
   double confirm_agree_deg = 0.5;
   void validate() const;
   bool operator==(const MotionSettings&) const = default;
+};
+
+/// Recovery (slam/survey_matcher.cpp, match_scan): in a sequence without odometry, a scan whose
+/// match from the motion model's start stays doubtful (or fails) is registered again without a
+/// start: its features against those of the local map around the previous scan
+/// (registration/global_registration.hpp), then matched from there as any scan, and kept when that
+/// match is trusted. A car's scans 3-12 m and up to 40 degrees apart (KITTI 07) start out of ICP's
+/// reach from constant velocity; a match that converged right from there anyway is confirmed by the
+/// same pose from an independent start. Odometry's starts are left as they are: a doubtful match
+/// there is the user's to see (docs/benchmarks.md).
+struct RecoverySettings {
+  bool enabled = true;
+  GlobalRegistrationSettings global;
+  /// The local map holds the registered scans' points within the scan's box, placed at the previous
+  /// scan's pose, grown by this: how far a lost scan may have gone.
+  double reach_cm = 1500.0;
+  void validate() const;
+  bool operator==(const RecoverySettings&) const = default;
 };
 
 /// Closing loops (pairwise and incremental matching; slam/loop_closing.cpp, slam/pose_graph.hpp).
@@ -214,6 +233,7 @@ struct MappingSettings {
   float max_retry_bound_cm = 400.0f;
   LoopClosureSettings loops;
   MotionSettings motion;
+  RecoverySettings recovery;
 
   /// The default preset's ICP: the paper's schedule, then a refinement at 7.5 cm (0.3 x 25 cm),
   /// Anderson-accelerated, a phase converged when a step moves less than 1 mm and turns less than

@@ -14,6 +14,7 @@ SurveyMatcher::SurveyMatcher(const MappingSettings& settings, ComputeBackend& ba
       local_map_(settings, backend),
       motion_(settings),
       registration_(settings, backend),
+      recovery_(settings, local_map_),
       relaxation_(settings, backend, registration_, local_map_),
       loop_closing_(settings, backend, registration_, local_map_),
       backend_name_(backend.name() + ": " + backend.device_description()) {}
@@ -150,20 +151,42 @@ void SurveyMatcher::place(std::size_t i, const ScanMatch& match, const Pose& sta
   state_.judged(i, match.health);
 }
 
-void SurveyMatcher::confirm_far_match(std::size_t i, ScanMatch& match) {
+void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& prediction, ScanMatch& match) {
   const MotionSettings& motion = settings_.motion;
   if (!match.ok() || !match.retry || match.health.doubtful()) return;
   const PredictionError recent = motion_.recent_error(state_, i);
   if (recent.count < motion.confirm_min_history) return;
   const double far_cm = std::max<double>(motion.confirm_sigmas * recent.rms_cm, settings_.icp.max_pair_dist_cm);
   if (!(match.health.moved_cm > far_cm)) return;
+  // The second start: where the scan's features put it (independent of any motion model), in a
+  // sequence without odometry where recovery is on and they find it; else the other model's.
   Prediction other;
-  other.start = motion_.alternative_start(state_, i);
-  other.start_bound_cm = match.health.retry_bound_cm;
+  const RecoveredStart* features = recovery_on(i) ? &features_start(i) : nullptr;
+  const bool from_features = features != nullptr && features->global.found;
+  if (from_features) {
+    other.start = features->start;
+  } else {
+    other.start = motion_.alternative_start(state_, i);
+    other.start_bound_cm = match.health.retry_bound_cm;
+  }
+  char text[480];
+  const PreparedScan& scan = state_.prepared(i);
+  const double starts_apart_cm = rms_moved_cm(*scan.probe, prediction.start, other.start);
+  if (!from_features && features != nullptr && starts_apart_cm < match.health.retry_bound_cm) {
+    // The other model's start lies within the retry's reach of the first: the two matches would
+    // fall into one basin, right or wrong (a lost track in a drive: both end metres short).
+    std::snprintf(text, sizeof text,
+                  "the %g cm retry moved its points %.0f cm, %.0f times the recent predictions' error (%.1f cm RMS), "
+                  "and no independent start confirmed it: its FPFH features found none (%s), and standing still "
+                  "is %.0f cm from the prediction, within the retry's reach",
+                  double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
+                  recent.rms_cm, features->global.why_not.c_str(), starts_apart_cm);
+    match.health.doubt = text;
+    return;
+  }
   const ScanMatch second = match_from(i, other);
   step1_iterations_ += second.iterations;
   const Pose kept = match.retry->world_from_data;
-  char text[320];
   if (second.ok() && !second.health.doubtful()) {
     const Pose found = second.retry ? second.retry->world_from_data : second.first.world_from_data;
     const Pose apart = rigid_inverse(kept) * found;
@@ -174,7 +197,10 @@ void SurveyMatcher::confirm_far_match(std::size_t i, ScanMatch& match) {
                   "the %g cm retry moved its points %.0f cm, %.0f times the recent predictions' error (%.1f cm RMS), "
                   "and a second match from %s ended %.0f cm / %.1f deg from it: not confirmed",
                   double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
-                  recent.rms_cm, motion_.constant_velocity_at(state_, i) ? "the odometry's start" : "standing still",
+                  recent.rms_cm,
+                  from_features                          ? "where its FPFH features put it"
+                  : motion_.constant_velocity_at(state_, i) ? "the odometry's start"
+                                                            : "standing still",
                   translation_norm(apart), rotation_angle_deg(apart));
   } else {
     std::snprintf(text, sizeof text,
@@ -184,6 +210,73 @@ void SurveyMatcher::confirm_far_match(std::size_t i, ScanMatch& match) {
                   recent.rms_cm);
   }
   match.health.doubt = text;
+}
+
+bool SurveyMatcher::recovery_on(std::size_t i) const {
+  return settings_.recovery.enabled && i >= 1 && motion_.constant_velocity_at(state_, i) && state_.registered(i - 1);
+}
+
+const RecoveredStart& SurveyMatcher::features_start(std::size_t i) {
+  if (!features_start_ || features_start_->first != i) features_start_.emplace(i, recovery_.find(state_, i));
+  return features_start_->second;
+}
+
+void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMatch& match, Pose& start) {
+  if (!recovery_on(i)) return;
+  if (match.ok() && !match.health.doubtful()) return;
+  const RecoveredStart& found = features_start(i);
+  char text[400];
+  if (!found.global.found) {
+    if (match.ok() && match.health.doubt.find("FPFH") == std::string::npos) {  // not said yet
+      match.health.doubt += " (registered again without a start, from its FPFH features: " + found.global.why_not + ")";
+    }
+    return;
+  }
+  Prediction from_features;
+  from_features.start = found.start;
+  ScanMatch again = match_from(i, from_features);
+  step1_iterations_ += again.iterations;
+  const auto pose_of = [](const ScanMatch& m) { return m.retry ? m.retry->world_from_data : m.first.world_from_data; };
+  // A doubt that says the match may be stuck where its start left it (out of reach, not settled,
+  // surfaces apart) is answered by a second start: two independent ones ending at one pose.
+  const auto start_dependent = [](const RegistrationHealth& h) {
+    return h.failed == HealthTest::kReach || h.failed == HealthTest::kBeyondBound || h.failed == HealthTest::kEdge;
+  };
+  if (match.ok() && again.ok() && again.health.doubtful() && start_dependent(match.health) &&
+      start_dependent(again.health)) {
+    const Pose apart = rigid_inverse(pose_of(match)) * pose_of(again);
+    const MotionSettings& motion = settings_.motion;
+    if (translation_norm(apart) <= motion.confirm_agree_cm && rotation_angle_deg(apart) <= motion.confirm_agree_deg) {
+      std::snprintf(text, sizeof text,
+                    "trusted: the match from the motion model's start and one from its FPFH features (%zu of %zu "
+                    "feature pairs agreeing) ended %.1f cm / %.2f deg apart; alone, it was doubtful: %s",
+                    found.global.inliers, found.global.correspondences, translation_norm(apart),
+                    rotation_angle_deg(apart), again.health.doubt.c_str());
+      again.health.note = text;
+      again.health.doubt.clear();
+      again.health.failed = HealthTest::kNone;
+      again.health.out_of_reach = false;
+    }
+  }
+  if (!again.ok() || again.health.doubtful()) {
+    if (match.ok()) {
+      std::snprintf(text, sizeof text,
+                    " (registered again without a start, %zu of %zu feature pairs agreeing, and matched from there: %s)",
+                    found.global.inliers, found.global.correspondences,
+                    again.ok() ? again.health.doubt.c_str() : to_string(again.first.stop));
+      match.health.doubt += text;
+    }
+    return;
+  }
+  // Trusted. How far the prediction was off is measured from it (the adaptive bound learns from it).
+  const Pose found_pose = pose_of(again);
+  const Pose correction = rigid_inverse(prediction.start) * found_pose;
+  again.health.correction_cm = translation_norm(correction);
+  again.health.correction_deg = rotation_angle_deg(correction);
+  again.health.moved_cm = rms_moved_cm(*state_.prepared(i).probe, prediction.start, found_pose);
+  again.health.recovered_inliers = found.global.inliers;
+  match = std::move(again);
+  start = found.start;
 }
 
 void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTiming& timing) {
@@ -236,8 +329,10 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
     const Prediction prediction = motion_.predict(state_, i);
     ScanMatch match = match_from(i, prediction);
     step1_iterations_ += match.iterations;
-    confirm_far_match(i, match);
-    place(i, match, prediction.start);
+    confirm_far_match(i, prediction, match);
+    Pose start = prediction.start;
+    recover(i, prediction, match, start);
+    place(i, match, start);
     if (raw != nullptr && timing != nullptr) refine_deskew(i, *raw, *timing);
   });
   if (settings_.mode == MatchingMode::kSimultaneous) {
@@ -248,6 +343,7 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
     });
   }
   last_metascan_ = {};
+  features_start_.reset();
   state_.set_match_time(i, arrived.seconds());
   control_.report(i + 1, to_string(settings_.mode));
 }

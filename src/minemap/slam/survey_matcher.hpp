@@ -6,6 +6,7 @@
 //   survey_state       where every scan stands; the one writer of poses
 //   local_map          the metascan, and the relaxation's union
 //   scan_registration  register and judge one scan, retry wider (paper IV.A, registration/)
+//   recovery           a lost scan found again without a start (features and RANSAC)
 //   relaxation         the paper's queue (IV.B step 3)
 //   loop_closing       returns to known places and the pose graph
 //
@@ -13,12 +14,14 @@
 // on a CPU backend); nothing here is reset by hand.
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "minemap/backend/compute_backend.hpp"
 #include "minemap/slam/local_map.hpp"
 #include "minemap/slam/loop_closing.hpp"
 #include "minemap/slam/motion_model.hpp"
+#include "minemap/slam/recovery.hpp"
 #include "minemap/slam/relaxation.hpp"
 #include "minemap/slam/run_control.hpp"
 #include "minemap/slam/scan_preparation.hpp"
@@ -65,8 +68,19 @@ class SurveyMatcher {
   ScanMatch match_incremental(std::size_t i, const Pose& start, float start_bound_cm) const;
   ScanMatch match_from(std::size_t i, const Prediction& prediction) const;
   /// A retry that landed far from the prediction (MotionSettings::confirm_sigmas): matched again from
-  /// the other model's start; doubtful unless both end at the same pose.
-  void confirm_far_match(std::size_t i, ScanMatch& match);
+  /// another start (where the scan's features put it, in a sequence without odometry; else the
+  /// other model's); doubtful unless both end at the same pose, or when the only other start lies
+  /// within the retry's reach of the prediction (not independent).
+  void confirm_far_match(std::size_t i, const Prediction& prediction, ScanMatch& match);
+  /// A sequence without odometry (MappingSettings::recovery): scan i's match from the prediction
+  /// failed or is doubtful, so it is registered again without a start and matched from there;
+  /// `match` and `start` are replaced when that match is trusted, and a doubt says what was tried
+  /// when not.
+  void recover(std::size_t i, const Prediction& prediction, ScanMatch& match, Pose& start);
+  /// Whether scan i may be recovered: a sequence without odometry, recovery on, scan i-1 registered.
+  bool recovery_on(std::size_t i) const;
+  /// Where scan i's features put it (Recovery::find), computed once per scan.
+  const RecoveredStart& features_start(std::size_t i);
   /// Places scan i where `match` put it (or fails it at `start`).
   void place(std::size_t i, const ScanMatch& match, const Pose& start);
   /// A sweep registered: deskewed again by the step its match found, and matched again from there
@@ -82,6 +96,7 @@ class SurveyMatcher {
   LocalMap local_map_;
   MotionPrediction motion_;
   ScanRegistration registration_;
+  Recovery recovery_;
   Relaxation relaxation_;
   LoopClosing loop_closing_;
   // Counters of the run (MappingResult's).
@@ -106,6 +121,8 @@ class SurveyMatcher {
     std::shared_ptr<const PreparedCloud> cloud;
   };
   mutable LastMetascan last_metascan_;
+  /// features_start's answer for the scan being matched (dropped when it is done).
+  std::optional<std::pair<std::size_t, RecoveredStart>> features_start_;
 };
 
 }  // namespace minemap::detail
