@@ -67,16 +67,25 @@ def _option_args(settings: dict[str, Any], function: str) -> list[str]:
 
 @dataclass
 class RegistrationResult:
-    """One ICP registration (minemap.register): `pose` is T_target_source (4x4, translation in the
+    """One registration (minemap.register): `pose` is T_target_source (4x4, translation in the
     unit given), `rms` the RMS pair distance in that unit, `stop_reason` "converged",
     "iteration cap reached", "too few pairs (no overlap)" or "numeric failure (...)" (the last two:
-    the pose is `init`, `converged` is False)."""
+    the pose is `init`, `converged` is False).
+
+    ICP converges from any start, right or not: `trusted` is the verdict `minemap map` gives a match
+    (False where it exits 13), `doubt` says which test failed with its figures, `health` holds them
+    (lengths in the unit given), and `retry_bound` (> 0) the wider bound a trusted retry started
+    from after the match at the pair bound was doubtful."""
     pose: np.ndarray
     iterations: int
     pairs: int
     rms: float
     stop_reason: str
     converged: bool
+    trusted: bool = False
+    doubt: str = ""
+    retry_bound: float = 0.0
+    health: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -128,13 +137,19 @@ class Survey:
 # ---- the API ----------------------------------------------------------------------------------------
 
 def register(source, target, init=None, *, unit: str = "m", **settings) -> RegistrationResult:
-    """Registers `source` onto `target` ((N, 3) float32/float64 arrays in `unit`) with minemap's ICP
-    (Horn's closed form, the bucket kd-tree), starting from `init` (4x4, T_target_source). Settings:
-    the ICP options of `minemap map` (max_pair_dist_cm, refine_fraction, max_iterations, min_step_cm,
-    min_step_deg, search, bucket_size, plain_icp, backend, threads, preset)."""
+    """Registers `source` onto `target` ((N, 3) float32/float64 arrays in `unit`) as `minemap map`
+    registers a scan against the one before it: both reduced as map reduces them (15 cm voxel means,
+    the target's model 10 cm; reduction="slices" keeps every point of arrays, which have no
+    slices), minemap's ICP (Horn's closed form, the bucket kd-tree) from `init` (4x4,
+    T_target_source), judged, and when doubtful tried again from `init` at 4x and 16x the pair bound
+    (at most 4 m), coarse to fine, kept when trusted. Settings: the options of `minemap map` that
+    apply to a pair (voxel_cm, model_voxel_cm, reduction, max_pair_dist_cm, refine_fraction,
+    max_iterations, min_step_cm, min_step_deg, search, bucket_size, plain_icp, no_retry,
+    retry_bound_factors, no_health_check, health_*, backend, threads, preset)."""
     d = _core.register(source, target, init, unit, _option_args(settings, "register"))
     return RegistrationResult(pose=d["pose"], iterations=d["iterations"], pairs=d["pairs"], rms=d["rms"],
-                              stop_reason=d["stop_reason"], converged=d["converged"])
+                              stop_reason=d["stop_reason"], converged=d["converged"], trusted=d["trusted"],
+                              doubt=d["doubt"], retry_bound=d["retry_bound"], health=dict(d["health"]))
 
 
 def _mapping_result(d: dict) -> MappingResult:

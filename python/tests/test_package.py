@@ -123,21 +123,53 @@ def test_register_recovers_a_known_motion():
     truth[:3, :3] = _rotation_z(0.05)
     truth[:3, 3] = [0.10, -0.05, 0.02]
     source = (target - truth[:3, 3]) @ truth[:3, :3]  # source = truth^-1 * target
-    result = minemap.register(source, target, max_pair_dist_cm=50)
-    assert result.converged and result.stop_reason == "converged"
+    # Every point (no reduction: arrays have no slices to filter): the motion exactly.
+    result = minemap.register(source, target, max_pair_dist_cm=50, reduction="slices")
+    assert result.converged and result.stop_reason == "converged" and result.trusted
     assert np.allclose(result.pose, truth, atol=1e-5)
     assert result.pairs == len(source) and result.rms < 1e-4
+    # The default reduces both to voxel means, as `minemap map`: within a millimetre.
+    reduced = minemap.register(source, target, max_pair_dist_cm=50)
+    assert reduced.converged and reduced.trusted and reduced.pairs < len(source)
+    assert np.allclose(reduced.pose[:3, 3], truth[:3, 3], atol=2e-3), reduced.pose
     # float32 in, a strided view in, cm: the same motion.
     wide = np.zeros((len(source), 5), np.float32)
     wide[:, 1:4] = source * 100
     view = wide[:, 1:4]
     assert not view.flags.c_contiguous
-    in_cm = minemap.register(view, (target * 100).astype(np.float32), unit="cm", max_pair_dist_cm=50)
+    in_cm = minemap.register(view, (target * 100).astype(np.float32), unit="cm", max_pair_dist_cm=50,
+                             reduction="slices")
     assert np.allclose(in_cm.pose[:3, :3], truth[:3, :3], atol=1e-4)
     assert np.allclose(in_cm.pose[:3, 3], truth[:3, 3] * 100, atol=0.05)
     # Too far apart for the bound: no pairs, the pose is init, said so.
     far = minemap.register(source + 100.0, target)
     assert not far.converged and far.stop_reason.startswith("too few pairs") and np.array_equal(far.pose, np.eye(4))
+
+
+def test_register_judges_and_retries_as_map_does():
+    # The fast_gicp pair from the identity: 0.49 m and 0.6 deg from its reference, twice the 25 cm
+    # bound's reach. Before (ICP on the raw points, nothing judged) register returned converged=True
+    # at the identity's minimum, 0.5 m off. Now, as `minemap map`: reduced, the match at 25 cm moves
+    # the points twice the bound, so it is doubtful ("out of reach") on its own, and the retry from
+    # 1 m, coarse to fine, is trusted and lands on the reference.
+    shared = Path(os.environ.get("MINEMAP_SHARED_DATA") or Path(__file__).resolve().parents[3] / "shared" / "data")
+    if not (shared / "fast_gicp_pair").is_dir():
+        shared = Path("/work/shared/data")
+    survey = minemap.read_survey(shared / "fast_gicp_pair")
+    target, source = survey.points[survey.names.index("251370668")], survey.points[survey.names.index("251371071")]
+    reference = np.loadtxt(shared / "fast_gicp_pair" / "relative.txt")
+    narrow = minemap.register(source, target, no_retry=True)
+    assert narrow.converged and not narrow.trusted and "out of reach" in narrow.doubt, narrow.doubt
+    result = minemap.register(source, target)
+    assert result.converged and result.trusted and result.doubt == "", result.doubt
+    assert result.retry_bound == pytest.approx(1.0)  # metres, the unit given
+    assert np.linalg.norm(result.pose[:3, 3] - reference[:3, 3]) < 0.03
+    assert result.health["paired_fraction"] > 0.5 and result.health["pair_bound"] == pytest.approx(0.25)
+    # A known motion in a synthetic room: trusted at once.
+    rng = np.random.default_rng(3)
+    room = _room(rng, 5000)
+    moved = minemap.register(room + [0.05, 0.0, 0.0], room)
+    assert moved.trusted and moved.retry_bound == 0.0 and np.allclose(moved.pose[:3, 3], [-0.05, 0, 0], atol=2e-3)
 
 
 @pytest.mark.parametrize("bad, message", [

@@ -26,8 +26,12 @@
 #include "minemap/core/error.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/io/scan_builder.hpp"
+#include "minemap/registration/health.hpp"
 #include "minemap/registration/icp.hpp"
 #include "minemap/report/map_output.hpp"
+// Internal (not installed): the matcher's reduction and registration of one scan, which register() shares.
+#include "minemap/slam/scan_preparation.hpp"
+#include "minemap/slam/scan_registration.hpp"
 
 namespace py = pybind11;
 using namespace minemap;
@@ -467,28 +471,55 @@ py::dict map_survey_api(const py::object& survey_path, const py::object& scans, 
 py::dict register_api(const py::handle& source, const py::handle& target, const py::object& init,
                       const std::string& unit_text, const std::vector<std::string>& args) {
   const cli::MapCommand command = parse(args);
+  const MappingSettings& settings = command.settings;
   const LengthUnit unit = parse_length_unit(unit_text);
   const Scan data = scan_from_array(source, "source", "source", unit);
   const Scan model = scan_from_array(target, "target", "target", unit);
   const Pose init_cm = init.is_none() ? Pose::Identity() : pose_from_array(init, unit, "init");
-  IcpResult result;
+  detail::ScanMatch match;
   {
     py::gil_scoped_release no_gil;
     BackendChoice backend = cli::make_backend_for(command.options);
-    result = cli::with_threads(command.options, [&] {
-      const auto data_cloud = backend.backend->prepare(data.points_cm, command.settings.tree);
-      const auto model_cloud = backend.backend->prepare(model.points_cm, command.settings.tree);
-      const WorldModel models[] = {{model_cloud.get(), model.world_from_points()}};
+    match = cli::with_threads(command.options, [&] {
+      // The pair as `minemap map` registers a scan against the scan before it: both reduced as
+      // map reduces them (the settings' reduction: voxel means by default, the model denser), ICP,
+      // judged at its end (registration/health.hpp) and, when doubtful, tried again from the same
+      // start at wider bounds, coarse to fine (the same code: scan_registration.hpp). On raw dense
+      // points ICP can settle short of a pose that the reduced clouds reach (the fast_gicp pair:
+      // at the identity's minimum, 50 cm off), and nothing at that minimum looks wrong.
+      detail::RunControl control;
+      detail::ScanPreparation preparation(settings, *backend.backend);
+      const detail::PreparedScan prepared = preparation.prepare(data, control);
+      const detail::PreparedScan reference = preparation.prepare(model, control);
+      const std::vector<WorldModel> models = {{reference.model_cloud.get(), model.world_from_points()}};
       Scan placed = data;
       placed.pose_cm = init_cm;
-      return register_icp(*backend.backend, *data_cloud, placed.world_from_points(), models, command.settings.icp);
+      const detail::ScanRegistration registration(settings, *backend.backend);
+      return registration.register_scan(prepared, placed.world_from_points(),
+                                        [&](float, const Pose&) { return models; });
     });
   }
+  const IcpResult& kept = match.retry ? *match.retry : match.first;
   // T_world_points of the data back to T_world_source (the local origin taken out).
   Scan placed = data;
-  placed.set_world_from_points(result.world_from_data);
-  py::dict d = icp_to_dict(result, unit);
-  d["pose"] = pose_to_array(result.ok() ? placed.pose_cm : init_cm, unit);
+  placed.set_world_from_points(kept.world_from_data);
+  py::dict d = icp_to_dict(kept, unit);
+  d["pose"] = pose_to_array(kept.ok() ? placed.pose_cm : init_cm, unit);
+  const RegistrationHealth& h = match.health;
+  const double per_cm = 1.0 / centimetres_per(unit);
+  d["judged"] = h.judged;
+  d["trusted"] = kept.ok() && !h.doubtful();
+  d["doubt"] = h.doubt;
+  d["retry_bound"] = double(h.retry_bound_cm) * per_cm;
+  py::dict health;
+  health["paired_fraction"] = h.paired_fraction;
+  health["beyond_bound_fraction"] = h.beyond_bound_fraction;
+  health["edge_fraction"] = h.edge_fraction;
+  health["rms"] = h.rms_cm * per_cm;
+  health["moved"] = h.moved_cm * per_cm;
+  health["pair_bound"] = double(h.pair_bound_cm) * per_cm;
+  health["translation_constraint"] = h.translation_constraint;
+  d["health"] = health;
   return d;
 }
 
