@@ -131,6 +131,7 @@ point size <input id="point-size" type="range" min="1" max="6" step="1" value="2
 <div id="legend" class="dim"></div>
 <div id="colour-bar"></div><div id="colour-ends" class="dim"><span id="colour-lo"></span><span id="colour-hi"></span></div>
 <div class="dim">drag: orbit · right drag or shift+drag: pan · wheel: zoom · click a scan position (red): its match</div>
+<div class="dim">red line: the scans' poses in order, where the sensor stood for scans in its own frame; for map segments already in world coordinates (a SLAM map's pieces) it shows each one's correction</div>
 </div>
 <div id="scale" class="box" title="at the orbit centre"><div id="scale-bar"></div><span id="scale-label"></span></div>
 <div id="info" class="box" hidden></div>
