@@ -147,12 +147,13 @@ TEST(Cli, BadInputNamesFileAndLineAndLeavesTheOutputFolderAsItWas) {
 
 TEST(Cli, ADoubtfulRegistrationIsNamedWrittenAndExits13UnlessAccepted) {
   // The LiDAR pair from the identity: 0.5 m apart, twice the default 25 cm bound's reach (the
-  // retry from a wider bound, which would make it right, is switched off, and the start is the
-  // odometry's: the constant-velocity model's first match would start at 2 m).
+  // retry from a wider bound, which would make it right, is switched off, and so is the recovery
+  // that would confirm it from the scan's features; the start is the odometry's: the
+  // constant-velocity model's first match would start at 2 m).
   TempDir dir;
   const std::string survey = (test::shared_data_dir() / "fast_gicp_pair").string();
   std::string output;
-  ASSERT_EQ(run_cli("map " + survey + " --out " + (dir / "out").string() + " --backend cpu --quiet --no-retry --motion-model odometry", &output),
+  ASSERT_EQ(run_cli("map " + survey + " --out " + (dir / "out").string() + " --backend cpu --quiet --no-retry --no-recovery --motion-model odometry", &output),
             13)
       << output;
   const auto named = lines_containing(output, "scan 251371071 registered, but doubtful: the match moved its points");
@@ -163,7 +164,7 @@ TEST(Cli, ADoubtfulRegistrationIsNamedWrittenAndExits13UnlessAccepted) {
   EXPECT_EQ(report["doubtful_scans"], nlohmann::json::array({"251371071"}));
   EXPECT_FALSE(report["scans"][1]["health"]["trusted"].get<bool>());
   EXPECT_EQ(run_cli("map " + survey + " --out " + (dir / "accepted").string() +
-                        " --backend cpu --quiet --no-retry --motion-model odometry --accept-doubtful",
+                        " --backend cpu --quiet --no-retry --no-recovery --motion-model odometry --accept-doubtful",
                     &output), 0) << output;
   EXPECT_EQ(run_cli("map " + survey + " --out " + (dir / "wide").string() + " --backend cpu --quiet --max-pair-dist-cm 100",
                     &output), 0) << output;

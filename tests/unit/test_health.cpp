@@ -188,9 +188,17 @@ TEST(HealthRealData, ALidarPairOutOfTheBoundsReachIsDoubtfulThenRightFromAWiderB
   MappingSettings mapping;
   mapping.motion.model = MotionModel::kOdometry;
   mapping.retry_bound_factors.clear();
+  mapping.recovery.enabled = false;
   const auto narrow = map_survey(survey.scans, mapping, cpu);
   ASSERT_EQ(narrow.doubtful(), std::vector<std::size_t>{1});
   EXPECT_NE(narrow.scans[1].health.doubt.find("out of reach"), std::string::npos) << narrow.scans[1].health.doubt;
+  // That match converged right from out of reach: a second one from the scan's own features
+  // (recovery) ends at the same pose, so with recovery on it is trusted, at the same pose.
+  mapping.recovery.enabled = true;
+  const auto confirmed = map_survey(survey.scans, mapping, cpu);
+  ASSERT_TRUE(confirmed.doubtful().empty()) << confirmed.scans[1].health.doubt;
+  EXPECT_TRUE(confirmed.scans[1].pose_cm == narrow.scans[1].pose_cm);
+  EXPECT_NE(confirmed.scans[1].health.note.find("FPFH"), std::string::npos);
   // The default tries a doubtful match again from 1 m (then 4 m), coarse to fine: trusted, and right.
   MappingSettings from_odometry;
   from_odometry.motion.model = MotionModel::kOdometry;

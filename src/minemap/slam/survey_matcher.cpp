@@ -161,7 +161,8 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
   // The second start: where the scan's features put it (independent of any motion model), in a
   // sequence without odometry where recovery is on and they find it; else the other model's.
   Prediction other;
-  const RecoveredStart* features = recovery_on(i) ? &features_start(i) : nullptr;
+  const RecoveredStart* features =
+      recovery_on(i) && motion_.constant_velocity_at(state_, i) ? &features_start(i) : nullptr;
   const bool from_features = features != nullptr && features->global.found;
   if (from_features) {
     other.start = features->start;
@@ -213,7 +214,7 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
 }
 
 bool SurveyMatcher::recovery_on(std::size_t i) const {
-  return settings_.recovery.enabled && i >= 1 && motion_.constant_velocity_at(state_, i) && state_.registered(i - 1);
+  return settings_.recovery.enabled && i >= 1 && state_.registered(i - 1);
 }
 
 const RecoveredStart& SurveyMatcher::features_start(std::size_t i) {
@@ -224,6 +225,11 @@ const RecoveredStart& SurveyMatcher::features_start(std::size_t i) {
 void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMatch& match, Pose& start) {
   if (!recovery_on(i)) return;
   if (match.ok() && !match.health.doubtful()) return;
+  // An odometry start is the user's: its match keeps its pose, and only its verdict may change
+  // (two independent starts, one pose). A constant-velocity start is ours: a trusted match from the
+  // features replaces it.
+  const bool may_replace = prediction.constant_velocity;
+  if (!may_replace && !match.ok()) return;
   const RecoveredStart& found = features_start(i);
   char text[400];
   if (!found.global.found) {
@@ -242,30 +248,38 @@ void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMat
   const auto start_dependent = [](const RegistrationHealth& h) {
     return h.failed == HealthTest::kReach || h.failed == HealthTest::kBeyondBound || h.failed == HealthTest::kEdge;
   };
-  if (match.ok() && again.ok() && again.health.doubtful() && start_dependent(match.health) &&
-      start_dependent(again.health)) {
-    const Pose apart = rigid_inverse(pose_of(match)) * pose_of(again);
-    const MotionSettings& motion = settings_.motion;
-    if (translation_norm(apart) <= motion.confirm_agree_cm && rotation_angle_deg(apart) <= motion.confirm_agree_deg) {
-      std::snprintf(text, sizeof text,
-                    "trusted: the match from the motion model's start and one from its FPFH features (%zu of %zu "
-                    "feature pairs agreeing) ended %.1f cm / %.2f deg apart; alone, it was doubtful: %s",
-                    found.global.inliers, found.global.correspondences, translation_norm(apart),
-                    rotation_angle_deg(apart), again.health.doubt.c_str());
-      again.health.note = text;
-      again.health.doubt.clear();
-      again.health.failed = HealthTest::kNone;
-      again.health.out_of_reach = false;
-    }
+  const Pose apart = match.ok() && again.ok() ? Pose(rigid_inverse(pose_of(match)) * pose_of(again)) : Pose::Identity();
+  const MotionSettings& motion = settings_.motion;
+  const bool agree = match.ok() && again.ok() && translation_norm(apart) <= motion.confirm_agree_cm &&
+                     rotation_angle_deg(apart) <= motion.confirm_agree_deg;
+  if (agree && start_dependent(match.health) && (!again.health.doubtful() || start_dependent(again.health))) {
+    std::snprintf(text, sizeof text,
+                  "trusted: the match from %s and one from its FPFH features (%zu of %zu feature pairs agreeing) "
+                  "ended %.1f cm / %.2f deg apart; alone, it was doubtful: %s",
+                  may_replace ? "the motion model's start" : "the odometry's start", found.global.inliers,
+                  found.global.correspondences, translation_norm(apart), rotation_angle_deg(apart),
+                  match.health.doubt.c_str());
+    RegistrationHealth& confirmed = may_replace ? again.health : match.health;
+    confirmed.note = text;
+    confirmed.doubt.clear();
+    confirmed.failed = HealthTest::kNone;
+    confirmed.out_of_reach = false;
+    if (!may_replace) return;
   }
-  if (!again.ok() || again.health.doubtful()) {
-    if (match.ok()) {
+  if (!may_replace || !again.ok() || again.health.doubtful()) {
+    if (again.ok() && !again.health.doubtful()) {
+      std::snprintf(text, sizeof text,
+                    " (registered again without a start, %zu of %zu feature pairs agreeing: a trusted match from "
+                    "there ended %.0f cm / %.1f deg from this one)",
+                    found.global.inliers, found.global.correspondences, translation_norm(apart),
+                    rotation_angle_deg(apart));
+    } else {
       std::snprintf(text, sizeof text,
                     " (registered again without a start, %zu of %zu feature pairs agreeing, and matched from there: %s)",
                     found.global.inliers, found.global.correspondences,
                     again.ok() ? again.health.doubt.c_str() : to_string(again.first.stop));
-      match.health.doubt += text;
     }
+    if (match.ok()) match.health.doubt += text;
     return;
   }
   // Trusted. How far the prediction was off is measured from it (the adaptive bound learns from it).

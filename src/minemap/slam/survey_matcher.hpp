@@ -72,12 +72,13 @@ class SurveyMatcher {
   /// other model's); doubtful unless both end at the same pose, or when the only other start lies
   /// within the retry's reach of the prediction (not independent).
   void confirm_far_match(std::size_t i, const Prediction& prediction, ScanMatch& match);
-  /// A sequence without odometry (MappingSettings::recovery): scan i's match from the prediction
-  /// failed or is doubtful, so it is registered again without a start and matched from there;
-  /// `match` and `start` are replaced when that match is trusted, and a doubt says what was tried
-  /// when not.
+  /// Scan i's match from the prediction failed or is doubtful (MappingSettings::recovery): it is
+  /// registered again without a start and matched from there. Where both matches end at one pose
+  /// and each doubt was one a start can cause (reach, surfaces apart, not settled), it is trusted.
+  /// A constant-velocity start's `match` and `start` are replaced when the new match is trusted; an
+  /// odometry start's pose is kept. A doubt says what was tried when it stays.
   void recover(std::size_t i, const Prediction& prediction, ScanMatch& match, Pose& start);
-  /// Whether scan i may be recovered: a sequence without odometry, recovery on, scan i-1 registered.
+  /// Whether scan i may be recovered: recovery on, scan i-1 registered.
   bool recovery_on(std::size_t i) const;
   /// Where scan i's features put it (Recovery::find), computed once per scan.
   const RecoveredStart& features_start(std::size_t i);
