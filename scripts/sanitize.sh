@@ -23,7 +23,7 @@
 # the paper's queue: MappingDeterminism, Presets/*), HealthRealData.CarScans... (the health checks
 # and retries: HealthSurveys.*, Health.*), MappingLoops.ALoopSurveyIsClosedAndItsEndsAgree (loop
 # closing: Cli.ALoopSurveyIsClosedAndReported, PoseGraph.*). So do two moving-sensor drives (5 and
-# 23 s in Release): MovingMapping.SpinningAtTenMetresPerSecondWithoutOdometry (the motion model,
+# 23 s in Release): MovingMapping.SpinningAtTenMetresPerSecondWithoutOdometry and its weaving twin (the motion model,
 # deskew and local map run here in MovingCli.MapReadsTheSweepsAndAgreesWithTheTruthFrame) and
 # MappingLoops.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot (the loop verdicts run here in
 # MappingLoops.AMisclosureBeyondTheLimitMakesTheLoopsScanDoubtful).
@@ -73,7 +73,7 @@ cc="${cxx/clang++/clang}"; cc="${cc/g++/gcc}"
 jobs="${SANITIZE_JOBS:-$(nproc)}"
 timeout="${SANITIZE_TIMEOUT:-900}"
 supp="$repo_root/tests/sanitizers"
-heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBound|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|LiveMapper\..*|Recovery\..*|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package)$'
+heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBound|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|MovingMapping\.TheDeskewKeepsAWeavingSensorsMapFiveTimesCloser|LiveMapper\..*|Recovery\..*|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package)$'
 # TSan only: runs of the single-threaded parsers through the CLI (ASan checks them).
 heavy_thread='^(BadInput\.MapCommandGivesEachCaseItsExitCodeAndLeavesTheOutputFolder)$'
 
