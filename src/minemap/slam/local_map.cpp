@@ -58,13 +58,34 @@ std::vector<Eigen::Vector3f> concatenated(const std::vector<std::vector<Eigen::V
 std::vector<Eigen::Vector3f> first_point_per_cell(const std::vector<std::vector<Eigen::Vector3f>>& parts,
                                                   double cell_cm) {
   std::size_t total = 0;
-  for (const auto& part : parts) total += part.size();
-  CellSet taken(total);
-  const double scale = 1.0 / cell_cm;
-  std::vector<Eigen::Vector3f> points;
+  std::vector<std::size_t> offsets;  // where each part starts in the whole
   for (const auto& part : parts) {
-    for (const Eigen::Vector3f& p : part) {
-      if (taken.insert(cell_key(p, scale))) points.push_back(p);
+    offsets.push_back(total);
+    total += part.size();
+  }
+  const double scale = 1.0 / cell_cm;
+  std::vector<std::uint64_t> keys(total);
+  tbb::parallel_for(std::size_t{0}, parts.size(), [&](std::size_t k) {
+    for (std::size_t j = 0; j < parts[k].size(); ++j) keys[offsets[k] + j] = cell_key(parts[k][j], scale);
+  });
+  // The cells are dealt out to shards by their hash; each shard walks every key in order and keeps
+  // the first point of each of its cells, so a point is kept exactly as one walk in order would
+  // keep it, whatever the number of shards.
+  constexpr std::size_t kShards = 8;
+  const auto shard_of = [](std::uint64_t key) { return (key * 0xC2B2AE3D27D4EB4Full) >> 61; };
+  std::vector<std::uint8_t> keep(total, 0);
+  tbb::parallel_for(std::size_t{0}, kShards, [&](std::size_t shard) {
+    std::size_t mine = 0;
+    for (const std::uint64_t key : keys) mine += shard_of(key) == shard;
+    CellSet taken(mine);
+    for (std::size_t p = 0; p < total; ++p) {
+      if (shard_of(keys[p]) == shard && taken.insert(keys[p])) keep[p] = 1;
+    }
+  });
+  std::vector<Eigen::Vector3f> points;
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    for (std::size_t j = 0; j < parts[k].size(); ++j) {
+      if (keep[offsets[k] + j]) points.push_back(parts[k][j]);
     }
   }
   return points;

@@ -24,6 +24,8 @@ std::vector<Eigen::Vector3f> concatenated(const std::vector<std::vector<Eigen::V
 /// [k c, (k+1) c) on each axis): a moving sensor's local map (MotionSettings::local_map_cell_cm),
 /// where the parts are the nearest scan's first. Cells are told apart within 2^20 cells of the
 /// origin on each axis (105 km at 10 cm); a metascan sits in the previous scan's frame, near it.
+/// Parallel (keys per part, then cells dealt to shards by hash, each shard walking the points in
+/// order): the same points, in the same order, for any thread count.
 std::vector<Eigen::Vector3f> first_point_per_cell(const std::vector<std::vector<Eigen::Vector3f>>& parts,
                                                   double cell_cm);
 
