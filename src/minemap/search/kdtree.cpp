@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <limits>
 #include <stdexcept>
 
 namespace minemap {
@@ -24,8 +25,8 @@ struct KdTree::Builder {
   std::vector<std::array<float, 4>> leaf_means;
   int depth = 0;
 
-  /// Builds the subtree over points[begin, end); returns its node and the points' bounds.
-  std::int32_t build(std::int32_t begin, std::int32_t end, int level, float lo[3], float hi[3]);
+  /// Builds the subtree over points[begin, end), whose bounds are lo, hi; returns its node.
+  std::int32_t build(std::int32_t begin, std::int32_t end, int level, const float lo[3], const float hi[3]);
   /// Appends `other`'s nodes and leaves after this builder's own.
   void append(const Builder& other);
 };
@@ -56,7 +57,14 @@ KdTree::KdTree(std::span<const Eigen::Vector3f> points, const KdTreeSettings& se
   if (points_.empty()) return;
   Builder builder{points_, settings_, {}, {}, 0};
   builder.nodes.reserve(2 * (points_.size() / static_cast<std::size_t>(settings_.bucket_size) + 1));
-  float lo[3], hi[3];
+  float lo[3] = {points_[0].x, points_[0].y, points_[0].z}, hi[3] = {lo[0], lo[1], lo[2]};
+  for (const KdPoint& p : points_) {
+    const float c[3] = {p.x, p.y, p.z};
+    for (int d = 0; d < 3; ++d) {
+      lo[d] = std::min(lo[d], c[d]);
+      hi[d] = std::max(hi[d], c[d]);
+    }
+  }
   builder.build(0, static_cast<std::int32_t>(points_.size()), 1, lo, hi);
   nodes_ = std::move(builder.nodes);
   leaf_means_ = std::move(builder.leaf_means);
@@ -68,21 +76,12 @@ KdTree::KdTree(std::span<const Eigen::Vector3f> points, const KdTreeSettings& se
   }
 }
 
-std::int32_t KdTree::Builder::build(std::int32_t begin, std::int32_t end, int level, float lo[3], float hi[3]) {
+std::int32_t KdTree::Builder::build(std::int32_t begin, std::int32_t end, int level, const float lo[3],
+                                    const float hi[3]) {
   depth = std::max(depth, level);
   const auto node_index = static_cast<std::int32_t>(nodes.size());
   nodes.emplace_back();
 
-  lo[0] = hi[0] = points[begin].x;
-  lo[1] = hi[1] = points[begin].y;
-  lo[2] = hi[2] = points[begin].z;
-  for (std::int32_t i = begin + 1; i < end; ++i) {
-    const float c[3] = {points[i].x, points[i].y, points[i].z};
-    for (int d = 0; d < 3; ++d) {
-      lo[d] = std::min(lo[d], c[d]);
-      hi[d] = std::max(hi[d], c[d]);
-    }
-  }
   int axis = 0;
   for (int d = 1; d < 3; ++d) {
     if (hi[d] - lo[d] > hi[axis] - lo[axis]) axis = d;
@@ -91,13 +90,38 @@ std::int32_t KdTree::Builder::build(std::int32_t begin, std::int32_t end, int le
   const float split = lo[axis] + 0.5f * (hi[axis] - lo[axis]);
   auto coordinate = [axis](const KdPoint& p) { return axis == 0 ? p.x : (axis == 1 ? p.y : p.z); };
 
+  // The partition (std::partition's own swaps, in its order) and, in the same pass, the bounds of
+  // each half: each child gets its bounds without a pass of its own.
+  float left_lo[3], left_hi[3], right_lo[3], right_hi[3];
+  for (int d = 0; d < 3; ++d) {
+    left_lo[d] = right_lo[d] = std::numeric_limits<float>::infinity();
+    left_hi[d] = right_hi[d] = -std::numeric_limits<float>::infinity();
+  }
+  const auto grow = [](float box_lo[3], float box_hi[3], const KdPoint& p) {
+    const float c[3] = {p.x, p.y, p.z};
+    for (int d = 0; d < 3; ++d) {
+      box_lo[d] = std::min(box_lo[d], c[d]);
+      box_hi[d] = std::max(box_hi[d], c[d]);
+    }
+  };
   std::int32_t middle = end;
   const bool small_enough = end - begin <= settings.bucket_size;
   if (!small_enough && level < kMaxKdDepth) {
-    middle = static_cast<std::int32_t>(
-        std::partition(points.begin() + begin, points.begin() + end,
-                       [&](const KdPoint& p) { return coordinate(p) < split; }) -
-        points.begin());
+    std::int32_t first = begin, last = end;
+    while (true) {
+      while (first != last && coordinate(points[first]) < split) grow(left_lo, left_hi, points[first++]);
+      if (first == last) break;
+      --last;
+      while (first != last && !(coordinate(points[last]) < split)) grow(right_lo, right_hi, points[last--]);
+      if (first == last) {
+        grow(right_lo, right_hi, points[first]);  // the one std::partition stopped on: not below the cut
+        break;
+      }
+      std::swap(points[first], points[last]);
+      grow(left_lo, left_hi, points[first++]);
+      grow(right_lo, right_hi, points[last]);
+    }
+    middle = first;
   }
   // A leaf when small, too deep, or when the cut separates nothing (all points equal on the axis,
   // or the midpoint rounds onto the lower coordinate): duplicates end up in one oversized bucket.
@@ -125,7 +149,6 @@ std::int32_t KdTree::Builder::build(std::int32_t begin, std::int32_t end, int le
     nodes[node_index] = {KdNode::kLeaf, begin, copies ? 1 : end - begin, leaf_index};
     return node_index;
   }
-  float left_lo[3], left_hi[3], right_lo[3], right_hi[3];
   std::int32_t left = 0, right = 0;
   if (end - begin >= kParallelPoints) {
     Builder right_half{points, settings, {}, {}, 0};
