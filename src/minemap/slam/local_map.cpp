@@ -1,7 +1,9 @@
 #include "minemap/slam/local_map.hpp"
 
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -64,22 +66,29 @@ std::vector<Eigen::Vector3f> first_point_per_cell(const std::vector<std::vector<
     total += part.size();
   }
   const double scale = 1.0 / cell_cm;
+  // The cells are dealt out to shards (one per thread) by their hash; each shard walks the points
+  // in order and keeps the first point of each of its cells, so a point is kept exactly as one walk
+  // in order would keep it, whatever the number of shards.
+  const std::size_t shards = std::clamp<std::size_t>(tbb::this_task_arena::max_concurrency(), 1, 64);
   std::vector<std::uint64_t> keys(total);
+  std::vector<std::uint8_t> shard_of(total);
+  std::vector<std::vector<std::size_t>> counts(parts.size(), std::vector<std::size_t>(shards, 0));
   tbb::parallel_for(std::size_t{0}, parts.size(), [&](std::size_t k) {
-    for (std::size_t j = 0; j < parts[k].size(); ++j) keys[offsets[k] + j] = cell_key(parts[k][j], scale);
+    for (std::size_t j = 0; j < parts[k].size(); ++j) {
+      const std::uint64_t key = cell_key(parts[k][j], scale);
+      const auto shard = static_cast<std::uint8_t>(((key * 0xC2B2AE3D27D4EB4Full) >> 32) % shards);
+      keys[offsets[k] + j] = key;
+      shard_of[offsets[k] + j] = shard;
+      ++counts[k][shard];
+    }
   });
-  // The cells are dealt out to shards by their hash; each shard walks every key in order and keeps
-  // the first point of each of its cells, so a point is kept exactly as one walk in order would
-  // keep it, whatever the number of shards.
-  constexpr std::size_t kShards = 8;
-  const auto shard_of = [](std::uint64_t key) { return (key * 0xC2B2AE3D27D4EB4Full) >> 61; };
   std::vector<std::uint8_t> keep(total, 0);
-  tbb::parallel_for(std::size_t{0}, kShards, [&](std::size_t shard) {
+  tbb::parallel_for(std::size_t{0}, shards, [&](std::size_t shard) {
     std::size_t mine = 0;
-    for (const std::uint64_t key : keys) mine += shard_of(key) == shard;
+    for (const auto& count : counts) mine += count[shard];
     CellSet taken(mine);
     for (std::size_t p = 0; p < total; ++p) {
-      if (shard_of(keys[p]) == shard && taken.insert(keys[p])) keep[p] = 1;
+      if (shard_of[p] == shard && taken.insert(keys[p])) keep[p] = 1;
     }
   });
   std::vector<Eigen::Vector3f> points;
