@@ -33,7 +33,8 @@
 # Order (slice detection: UosPoints.UnmarkedScannerOrderedFilesGetTheirSlicesBack), install_and_find_package (packaging, no memory or
 # thread question); under TSan only, BadInput.MapCommandGivesEachCase... (single-threaded parsers
 # run through the CLI; ASan runs it).
-# Recovery.* (three mappings with FPFH recovery, 2-12 s in Release) stay out too: the recovery path
+# Recovery.* and Cli.ScansOutOfReachAreRecoveredOrConfirmedAndSaySo (mappings with FPFH recovery,
+# 2-12 s in Release) stay out too: the recovery path
 # runs here in HealthRealData.ALidarPairOutOfTheBoundsReachIsDoubtfulThenRightFromAWiderBound, and
 # the features and RANSAC in Fpfh.* and GlobalRegistration.*.
 # Label "viewer" (the map.html page in headless Chromium) stays out too: Chromium is not
@@ -73,7 +74,7 @@ cc="${cxx/clang++/clang}"; cc="${cc/g++/gcc}"
 jobs="${SANITIZE_JOBS:-$(nproc)}"
 timeout="${SANITIZE_TIMEOUT:-900}"
 supp="$repo_root/tests/sanitizers"
-heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBound|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|MovingMapping\.TheDeskewKeepsAWeavingSensorsMapFiveTimesCloser|LiveMapper\..*|Recovery\..*|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package)$'
+heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBound|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|MovingMapping\.TheDeskewKeepsAWeavingSensorsMapFiveTimesCloser|LiveMapper\..*|Recovery\..*|Cli\.ScansOutOfReachAreRecoveredOrConfirmedAndSaySo|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package)$'
 # TSan only: runs of the single-threaded parsers through the CLI (ASan checks them).
 heavy_thread='^(BadInput\.MapCommandGivesEachCaseItsExitCodeAndLeavesTheOutputFolder)$'
 

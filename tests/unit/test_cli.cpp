@@ -333,6 +333,33 @@ TEST(Cli, WatchEndsAsMapOfTheSameFolderAndResumes) {
   }
 }
 
+// KITTI 07 read with no poses: the car's 3-12 m steps start out of the motion model's reach, the
+// matches end right, and a second match from each scan's FPFH features agrees: exit 0, every scan
+// trusted, the summary and report.json say which were recovered or confirmed. --no-recovery gives
+// the old verdicts (exit 13).
+TEST(Cli, ScansOutOfReachAreRecoveredOrConfirmedAndSaySo) {
+  TempDir dir;
+  const std::string survey = (test::shared_data_dir() / "kitti07_sequence").string();
+  std::string output;
+  ASSERT_EQ(run_cli("map " + survey + " --out " + (dir / "out").string() + " --backend cpu --threads 2", &output), 0)
+      << output;
+  std::ifstream in(dir / "out" / "report.json");
+  const auto report = nlohmann::json::parse(in);
+  EXPECT_TRUE(report["doubtful_scans"].empty());
+  std::size_t said = 0;
+  for (const auto& scan : report["scans"]) {
+    if (!scan.contains("health")) continue;
+    const auto& health = scan["health"];
+    EXPECT_TRUE(health["trusted"].get<bool>()) << scan["name"];
+    said += health["recovered"].get<bool>() || health["note"].get<std::string>().find("FPFH") != std::string::npos;
+  }
+  EXPECT_GE(said, 1u) << output;
+  EXPECT_EQ(run_cli("map " + survey + " --out " + (dir / "off").string() + " --backend cpu --threads 2 --quiet --no-recovery",
+                    &output),
+            13)
+      << output;
+}
+
 // KITTI has reference poses (graph.txt) and no odometry: the error row of the starts is not called
 // odometry.
 TEST(Cli, IdentityStartsAreNotCalledOdometry) {
