@@ -74,7 +74,7 @@ cc="${cxx/clang++/clang}"; cc="${cc/g++/gcc}"
 jobs="${SANITIZE_JOBS:-$(nproc)}"
 timeout="${SANITIZE_TIMEOUT:-900}"
 supp="$repo_root/tests/sanitizers"
-heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBound|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|MovingMapping\.TheDeskewKeepsAWeavingSensorsMapFiveTimesCloser|LiveMapper\..*|Recovery\..*|Cli\.ScansOutOfReachAreRecoveredOrConfirmedAndSaySo|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package)$'
+heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBoundOrRight|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|MovingMapping\.TheDeskewKeepsAWeavingSensorsMapFiveTimesCloser|LiveMapper\..*|Recovery\..*|Cli\.ScansOutOfReachAreRecoveredOrConfirmedAndSaySo|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package)$'
 # TSan only: runs of the single-threaded parsers through the CLI (ASan checks them).
 heavy_thread='^(BadInput\.MapCommandGivesEachCaseItsExitCodeAndLeavesTheOutputFolder)$'
 
