@@ -499,7 +499,7 @@ py::dict register_api(const py::handle& source, const py::handle& target, const 
                                         [&](float, const Pose&) { return models; });
     });
   }
-  const IcpResult& kept = match.retry ? *match.retry : match.first;
+  const IcpResult& kept = match.kept();
   // T_world_points of the data back to T_world_source (the local origin taken out).
   Scan placed = data;
   placed.set_world_from_points(kept.world_from_data);

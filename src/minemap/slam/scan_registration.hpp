@@ -28,6 +28,8 @@ struct ScanMatch {
   RegistrationHealth health;       ///< the verdict on the match kept (none when `first` failed)
   int iterations = 0;              ///< every ICP iteration spent, retries included (Table I's step 1)
   bool ok() const { return first.ok(); }
+  /// The match kept: the trusted retry where there is one, else the first.
+  const IcpResult& kept() const { return retry ? *retry : first; }
 };
 
 /// A match that starts at a wide bound and then runs the usual phases.

@@ -183,13 +183,14 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
                   double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
                   recent.rms_cm, features->global.why_not.c_str(), starts_apart_cm);
     match.health.doubt = text;
+    features_said_ = true;
     return;
   }
   const ScanMatch second = match_from(i, other);
   step1_iterations_ += second.iterations;
   const Pose kept = match.retry->world_from_data;
   if (second.ok() && !second.health.doubtful()) {
-    const Pose found = second.retry ? second.retry->world_from_data : second.first.world_from_data;
+    const Pose found = second.kept().world_from_data;
     const Pose apart = rigid_inverse(kept) * found;
     if (translation_norm(apart) <= motion.confirm_agree_cm && rotation_angle_deg(apart) <= motion.confirm_agree_deg) {
       return;  // two starts, one pose: confirmed
@@ -233,7 +234,7 @@ void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMat
   const RecoveredStart& found = features_start(i);
   char text[400];
   if (!found.global.found) {
-    if (match.ok() && match.health.doubt.find("FPFH") == std::string::npos) {  // not said yet
+    if (match.ok() && !features_said_) {
       match.health.doubt += " (registered again without a start, from its FPFH features: " + found.global.why_not + ")";
     }
     return;
@@ -242,13 +243,12 @@ void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMat
   from_features.start = found.start;
   ScanMatch again = match_from(i, from_features);
   step1_iterations_ += again.iterations;
-  const auto pose_of = [](const ScanMatch& m) { return m.retry ? m.retry->world_from_data : m.first.world_from_data; };
   // A doubt that says the match may be stuck where its start left it (out of reach, not settled,
   // surfaces apart) is answered by a second start: two independent ones ending at one pose.
   const auto start_dependent = [](const RegistrationHealth& h) {
     return h.failed == HealthTest::kReach || h.failed == HealthTest::kBeyondBound || h.failed == HealthTest::kEdge;
   };
-  const Pose apart = match.ok() && again.ok() ? Pose(rigid_inverse(pose_of(match)) * pose_of(again)) : Pose::Identity();
+  const Pose apart = match.ok() && again.ok() ? Pose(rigid_inverse(match.kept().world_from_data) * again.kept().world_from_data) : Pose::Identity();
   const MotionSettings& motion = settings_.motion;
   const bool agree = match.ok() && again.ok() && translation_norm(apart) <= motion.confirm_agree_cm &&
                      rotation_angle_deg(apart) <= motion.confirm_agree_deg;
@@ -283,7 +283,7 @@ void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMat
     return;
   }
   // Trusted. How far the prediction was off is measured from it (the adaptive bound learns from it).
-  const Pose found_pose = pose_of(again);
+  const Pose found_pose = again.kept().world_from_data;
   const Pose correction = rigid_inverse(prediction.start) * found_pose;
   again.health.correction_cm = translation_norm(correction);
   again.health.correction_deg = rotation_angle_deg(correction);
@@ -358,6 +358,7 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
   }
   last_metascan_ = {};
   features_start_.reset();
+  features_said_ = false;
   state_.set_match_time(i, arrived.seconds());
   control_.report(i + 1, to_string(settings_.mode));
 }

@@ -124,6 +124,8 @@ class SurveyMatcher {
   mutable LastMetascan last_metascan_;
   /// features_start's answer for the scan being matched (dropped when it is done).
   std::optional<std::pair<std::size_t, RecoveredStart>> features_start_;
+  /// A doubt of the scan being matched already says that its features found no start.
+  bool features_said_ = false;
 };
 
 }  // namespace minemap::detail
