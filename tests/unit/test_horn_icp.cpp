@@ -665,9 +665,9 @@ class ForwardingBackend : public ComputeBackend {
   explicit ForwardingBackend(ComputeBackend& inner) : inner_(inner) {}
   std::string name() const override { return inner_.name(); }
   std::string device_description() const override { return inner_.device_description(); }
-  std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points,
-                                               const KdTreeSettings& settings) override {
-    return inner_.prepare(std::move(points), settings);
+  std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points, const KdTreeSettings& settings,
+                                               TreeBuild when = TreeBuild::kNow) override {
+    return inner_.prepare(std::move(points), settings, when);
   }
   PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
                         const PairingSettings& settings) override {

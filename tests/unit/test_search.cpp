@@ -5,6 +5,7 @@
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <thread>
 
 #include "minemap/backend/compute_backend.hpp"
 #include "minemap/search/kdtree.hpp"
@@ -209,6 +210,41 @@ TEST_P(SearchTest, SumsAreBitIdenticalRunToRun) {
   EXPECT_EQ(first.count, second.count);
   EXPECT_EQ(first.sum_data_model, second.sum_data_model);
   EXPECT_EQ(first.sum_squared_distance_cm2, second.sum_squared_distance_cm2);
+}
+
+TEST_P(SearchTest, ATreeBuiltOnFirstUseIsTheTreeBuiltAtOnce) {
+  // A sweep's clouds are prepared with TreeBuild::kOnFirstUse: the same bounds before any tree
+  // exists, and the same tree, pairs and distances once one is searched, from several threads at once.
+  const auto model_points = random_cloud(4000, -300.f, 300.f, 11);
+  const auto query_points = random_cloud(1500, -320.f, 320.f, 12);
+  auto now = backend_->prepare(model_points, {}, TreeBuild::kNow);
+  auto later = backend_->prepare(model_points, {}, TreeBuild::kOnFirstUse);
+  EXPECT_EQ(later->bounds_min(), now->bounds_min());
+  EXPECT_EQ(later->bounds_max(), now->bounds_max());
+  EXPECT_EQ(later->bounds_min(), now->tree().bounds_min());
+  EXPECT_EQ(later->bounds_max(), now->tree().bounds_max());
+  EXPECT_EQ(later->centroid_cm(), now->centroid_cm());
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) threads.emplace_back([&] { (void)later->tree().size(); });
+  for (auto& thread : threads) thread.join();
+  ASSERT_EQ(later->tree().size(), now->tree().size());
+  for (std::size_t k = 0; k < now->tree().size(); ++k) {
+    EXPECT_EQ(later->tree().points()[k].original_index, now->tree().points()[k].original_index);
+  }
+  auto data = backend_->prepare(query_points, {});
+  const ModelPlacement at_once{now.get(), Pose::Identity()}, on_first_use{later.get(), Pose::Identity()};
+  for (auto method : {SearchMethod::kExact, SearchMethod::kApproximate}) {
+    const auto expected = backend_->nearest(*data, {&at_once, 1}, method, {40.0f});
+    const auto found = backend_->nearest(*data, {&on_first_use, 1}, method, {40.0f});
+    for (std::size_t i = 0; i < expected.size(); ++i) {
+      EXPECT_EQ(found[i].squared_distance_cm2, expected[i].squared_distance_cm2) << "query " << i;
+      EXPECT_EQ(found[i].model_point, expected[i].model_point) << "query " << i;
+    }
+  }
+  auto empty = backend_->prepare({}, {}, TreeBuild::kOnFirstUse);
+  EXPECT_TRUE(empty->empty());
+  EXPECT_EQ(empty->bounds_min(), Eigen::Vector3f::Zero());
+  EXPECT_TRUE(empty->tree().empty());
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, SearchTest, ::testing::Values("cpu", "opencl"));

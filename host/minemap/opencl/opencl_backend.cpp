@@ -92,8 +92,10 @@ class OpenClBackend final : public ComputeBackend {
   std::string name() const override { return "opencl"; }
   std::string device_description() const override { return runtime_->description(); }
 
+  /// Always builds the tree at once: the device copies are made here (`when` is a CPU saving).
   std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points_cm,
-                                               const KdTreeSettings& tree_settings) override {
+                                               const KdTreeSettings& tree_settings,
+                                               TreeBuild /*when*/ = TreeBuild::kNow) override {
     try {
       return std::make_shared<OpenClPreparedCloud>(*runtime_, std::move(points_cm), tree_settings);
     } catch (const DeviceError&) {

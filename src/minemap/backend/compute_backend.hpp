@@ -44,9 +44,11 @@ class ComputeBackend {
   /// The device, for reports: "CPU (TBB bucket kd-tree)", "Portable Computing Language / cpu-... (driver ...)".
   virtual std::string device_description() const = 0;
 
-  /// Builds the kd-tree (and device copies) of a cloud used as data and/or model.
+  /// Builds the kd-tree (and device copies) of a cloud used as data and/or model: now, or where
+  /// the backend allows it, when first searched (TreeBuild; the OpenCL backend uploads at once).
   virtual std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points_cm,
-                                                       const KdTreeSettings& tree_settings) = 0;
+                                                       const KdTreeSettings& tree_settings,
+                                                       TreeBuild when = TreeBuild::kNow) = 0;
 
   /// prepare() for each cloud, in order: one tree per cloud, the same trees as one call each. The
   /// CPU backend builds them in parallel (a survey's scans: each tree alone is too small to split

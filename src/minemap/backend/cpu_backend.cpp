@@ -17,8 +17,9 @@ constexpr auto kQueriesPerBlock = static_cast<std::size_t>(kPairSumBlock);
 
 class CpuPreparedCloud final : public PreparedCloud {
  public:
-  CpuPreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& settings)
-      : PreparedCloud(std::move(points), settings) {}
+  CpuPreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& settings,
+                   TreeBuild when = TreeBuild::kNow)
+      : PreparedCloud(std::move(points), settings, when) {}
 };
 
 /// One model as the hot loop needs it: data->model and model->data transforms in float.
@@ -82,8 +83,8 @@ NearestPair find_nearest(const Eigen::Vector3f& p, const std::vector<PlacedModel
 }  // namespace
 
 std::shared_ptr<const PreparedCloud> CpuBackend::prepare(std::vector<Eigen::Vector3f> points_cm,
-                                                         const KdTreeSettings& tree_settings) {
-  return std::make_shared<CpuPreparedCloud>(std::move(points_cm), tree_settings);
+                                                         const KdTreeSettings& tree_settings, TreeBuild when) {
+  return std::make_shared<CpuPreparedCloud>(std::move(points_cm), tree_settings, when);
 }
 
 std::vector<std::shared_ptr<const PreparedCloud>> CpuBackend::prepare_many(

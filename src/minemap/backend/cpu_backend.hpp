@@ -14,7 +14,8 @@ class CpuBackend final : public ComputeBackend {
   std::string name() const override { return "cpu"; }
   std::string device_description() const override { return "CPU (TBB bucket kd-tree)"; }
   std::shared_ptr<const PreparedCloud> prepare(std::vector<Eigen::Vector3f> points_cm,
-                                               const KdTreeSettings& tree_settings) override;
+                                               const KdTreeSettings& tree_settings,
+                                               TreeBuild when = TreeBuild::kNow) override;
   std::vector<std::shared_ptr<const PreparedCloud>> prepare_many(std::vector<std::vector<Eigen::Vector3f>> clouds_cm,
                                                                  const KdTreeSettings& tree_settings) override;
   PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,

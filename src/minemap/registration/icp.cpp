@@ -57,7 +57,7 @@ class IcpRun {
         pose_(start),
         min_pairs_(std::max(3, settings.termination.min_pairs)),
         frame_{data.centroid_cm(),
-               std::max(1.0, 0.5 * (data.tree().bounds_max() - data.tree().bounds_min()).cast<double>().norm())} {
+               std::max(1.0, 0.5 * (data.bounds_max() - data.bounds_min()).cast<double>().norm())} {
     result_.world_from_data = start;
   }
 

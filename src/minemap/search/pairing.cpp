@@ -13,11 +13,18 @@ SearchMethod parse_search_method(const std::string& text) {
   return parse_named(kSearchMethodNames, text, "search method");
 }
 
-PreparedCloud::PreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& tree_settings)
-    : points_(std::move(points)), tree_(points_, tree_settings) {
+PreparedCloud::PreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& tree_settings,
+                             TreeBuild when)
+    : points_(std::move(points)), tree_settings_(tree_settings) {
+  if (when == TreeBuild::kNow) tree();
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   for (const auto& p : points_) sum += p.cast<double>();
   if (points_.empty()) return;
+  bounds_min_ = bounds_max_ = points_[0];
+  for (const auto& p : points_) {
+    bounds_min_ = bounds_min_.cwiseMin(p);
+    bounds_max_ = bounds_max_.cwiseMax(p);
+  }
   // Rounded to float so that a device, which centres in float, subtracts exactly this reference.
   const Eigen::Vector3d centroid = sum / static_cast<double>(points_.size());
   // Through a volatile float: GCC 12's SLP vectorizer drops a plain double->float->double round

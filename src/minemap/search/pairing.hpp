@@ -8,6 +8,7 @@
 // are centred on the data cloud's centroid (no precision loss for clouds far from any origin).
 #include <Eigen/Core>
 #include <cstdint>
+#include <mutex>
 #include <span>
 #include <string>
 #include <vector>
@@ -47,23 +48,42 @@ struct NearestPair {
   Eigen::Vector3f position_cm = Eigen::Vector3f::Zero();  ///< the model point, in the DATA frame
 };
 
+/// When a cloud's kd-tree is built: at once (a cloud about to be searched), or by the first call
+/// of tree() (a moving sensor's sweep: its own trees are searched only if a later step matches
+/// against the scan alone, and building them for every sweep cost a tenth of the run).
+enum class TreeBuild { kNow, kOnFirstUse };
+
 /// A cloud prepared for pairing by one backend: its points (original order), its kd-tree, and
-/// whatever copies the backend keeps (device buffers). Thread-safety: immutable once prepared, so
-/// it may be shared between threads; the backend that prepared it must outlive it.
+/// whatever copies the backend keeps (device buffers). Thread-safety: immutable once prepared (a
+/// tree built on first use is built once, under std::call_once), so it may be shared between
+/// threads; the backend that prepared it must outlive it.
 class PreparedCloud {
  public:
   virtual ~PreparedCloud() = default;
   std::span<const Eigen::Vector3f> points() const { return points_; }
-  const KdTree& tree() const { return tree_; }
+  /// The kd-tree over points(); built here on the first call when prepared with kOnFirstUse.
+  const KdTree& tree() const {
+    std::call_once(built_, [this] { tree_ = KdTree(points_, tree_settings_); });
+    return tree_;
+  }
+  /// The points' bounding box (the tree's, without building it; zero for no points).
+  const Eigen::Vector3f& bounds_min() const { return bounds_min_; }
+  const Eigen::Vector3f& bounds_max() const { return bounds_max_; }
+  bool empty() const { return points_.empty(); }
   /// The centroid, rounded to float: the reference every sum over this cloud is centred on.
   const Eigen::Vector3d& centroid_cm() const { return centroid_cm_; }
 
  protected:
-  PreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& tree_settings);
+  PreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& tree_settings,
+                TreeBuild when = TreeBuild::kNow);
 
  private:
   std::vector<Eigen::Vector3f> points_;
-  KdTree tree_;
+  KdTreeSettings tree_settings_;
+  mutable std::once_flag built_;
+  mutable KdTree tree_;
+  Eigen::Vector3f bounds_min_ = Eigen::Vector3f::Zero();
+  Eigen::Vector3f bounds_max_ = Eigen::Vector3f::Zero();
   Eigen::Vector3d centroid_cm_ = Eigen::Vector3d::Zero();
 };
 

@@ -117,7 +117,7 @@ std::shared_ptr<const PreparedCloud> LocalMap::union_of(const SurveyState& state
                                                         const std::vector<std::size_t>& near, const Pose& frame,
                                                         const Pose& at, double grow_cm, double thin_cm) const {
   const Pose frame_inverse = rigid_inverse(frame);
-  const KdTree& own = state.prepared(i).cloud->tree();
+  const PreparedCloud& own = *state.prepared(i).cloud;
   const std::array<Eigen::Vector3f, 2> corners = {own.bounds_min(), own.bounds_max()};
   const Bounds3d reach = world_bounds(corners, frame_inverse * at);
   const Eigen::Vector3d reach_min = reach.min_cm.array() - grow_cm, reach_max = reach.max_cm.array() + grow_cm;

@@ -105,10 +105,14 @@ PreparedScan ScanPreparation::prepare(const Scan& scan, RunControl& control, con
     prepared.sweep_s = timing.duration_s;
   }
   if (deskewing) prepared.sweep_motion = sweep_motion;
+  // A sweep's own trees wait for a search that needs them (most never come: it is matched against
+  // a metascan, and the metascans take its points); a scan prepared alone is searched at once.
+  const TreeBuild when = timing.empty() ? TreeBuild::kNow : TreeBuild::kOnFirstUse;
   control.timed(&StageTimes::tree_build_s, [&] {
-    prepared.cloud = backend_.prepare(std::move(reduced.data), settings_.tree);
-    prepared.model_cloud = reduced.has_model ? backend_.prepare(std::move(reduced.model), settings_.tree) : prepared.cloud;
-    prepared.probe = reduced.has_probe ? backend_.prepare(std::move(reduced.probe), settings_.tree) : prepared.cloud;
+    prepared.cloud = backend_.prepare(std::move(reduced.data), settings_.tree, when);
+    prepared.model_cloud =
+        reduced.has_model ? backend_.prepare(std::move(reduced.model), settings_.tree, when) : prepared.cloud;
+    prepared.probe = reduced.has_probe ? backend_.prepare(std::move(reduced.probe), settings_.tree, when) : prepared.cloud;
     if (settings_.needs_planes()) prepared.planes.emplace(prepared.model_cloud->points(), settings_.plane_cell_cm);
   });
   return prepared;

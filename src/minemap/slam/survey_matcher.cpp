@@ -122,7 +122,7 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, flo
     LastMetascan& last = last_metascan_;
     const bool same_match = last.cloud && last.scan == i && last.bound_cm == bound_cm && last.frame == frame;
     if (thin_cm > 0.0 && same_match && standing == start) {
-      const KdTree& own = scan.cloud->tree();
+      const PreparedCloud& own = *scan.cloud;
       const double radius_cm = std::max(own.bounds_min().norm(), own.bounds_max().norm());
       const Pose moved = rigid_inverse(last.at) * start;
       const double shift_cm = translation_norm(moved) + rotation_angle_deg(moved) * (M_PI / 180.0) * radius_cm;

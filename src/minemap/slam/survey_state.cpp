@@ -71,9 +71,9 @@ void SurveyState::restore(std::size_t i, const ScanOutcome& saved) {
 }
 
 Bounds3d SurveyState::bounds_at(std::size_t i, const Pose& world_from_points) const {
-  const KdTree& tree = scans_[i].prepared.model_cloud->tree();
-  if (tree.empty()) return {};
-  const std::array<Eigen::Vector3f, 2> corners = {tree.bounds_min(), tree.bounds_max()};
+  const PreparedCloud& cloud = *scans_[i].prepared.model_cloud;
+  if (cloud.empty()) return {};
+  const std::array<Eigen::Vector3f, 2> corners = {cloud.bounds_min(), cloud.bounds_max()};
   return world_bounds(corners, world_from_points);
 }
 
