@@ -170,12 +170,13 @@ TEST(LocalMapCells, TheCellMustBeAFiniteLengthOrZero) {
 struct MovingRun {
   PoseErrors errors;
   std::size_t doubtful = 0;
+  int iterations = 0;  ///< step 1's ICP iterations
 };
 
 MovingRun map_moving(const sim::MovingSurvey& survey, const MappingSettings& settings) {
   CpuBackend cpu;
   const MappingResult result = map_survey(survey.scans, settings, cpu);
-  MovingRun run{pose_errors(test::poses_of(result), survey.truth_cm), 0};
+  MovingRun run{pose_errors(test::poses_of(result), survey.truth_cm), 0, result.step1_icp_iterations};
   for (const auto& scan : result.scans) run.doubtful += scan.health.doubtful() ? 1 : 0;
   return run;
 }
@@ -207,6 +208,20 @@ TEST(MovingMapping, SpinningAtTenMetresPerSecondWithoutOdometry) {
   EXPECT_LT(1.5 * run.errors.mean_translation_cm, skewed.errors.mean_translation_cm);
   // Thinning the local map costs no accuracy.
   EXPECT_LT(run.errors.mean_translation_cm, 1.25 * unthinned.errors.mean_translation_cm);
+  // A provisional first match (MotionSettings::provisional_step_factor) spends fewer iterations,
+  // and the refinement's full match keeps the accuracy.
+  MappingSettings provisional = defaults;
+  provisional.motion.provisional_step_factor = 3.0;
+  const MovingRun quick = map_moving(survey, provisional);
+  EXPECT_LT(quick.iterations, run.iterations * 9 / 10);
+  EXPECT_LT(quick.errors.mean_translation_cm, 8.0);
+  EXPECT_LT(quick.errors.mean_relative_translation_cm, 1.5);
+  EXPECT_EQ(quick.doubtful, 0u);
+  MappingSettings bad = defaults;
+  for (const double factor : {0.5, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    bad.motion.provisional_step_factor = factor;
+    EXPECT_THROW(bad.validate(), std::invalid_argument) << factor;
+  }
 }
 
 // The same sensor weaving (a yaw weave of 45 deg/s at its peak, a 2 s period): each sweep is

@@ -202,6 +202,9 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
          "Metascan: model points within the scan's box grown by the pair bound and this");
   number(g, "--local-map-cell-cm", mapping.motion.local_map_cell_cm,
          "A moving sensor's sweeps: the metascan keeps one point per cell of this size, the nearest scan's (0 = all)");
+  number(g, "--provisional-step-factor", mapping.motion.provisional_step_factor,
+         "A sweep's first match, before its deskew is refined, converges at this many times --min-step-cm/-deg "
+         "(1 = as any match)");
 }
 
 void MapOptionTable::declare_relaxation(MappingSettings& mapping) {

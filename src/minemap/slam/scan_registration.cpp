@@ -11,15 +11,20 @@ RegistrationHealth ScanRegistration::judge(const PreparedScan& scan, const Pose&
                             scan.planes_or_null());
 }
 
-IcpSettings ScanRegistration::icp_for(const PreparedScan& scan) const {
+IcpSettings ScanRegistration::icp_for(const PreparedScan& scan, Convergence convergence) const {
   IcpSettings icp = icp_;
   icp.termination.min_pairs = settings_.min_pairs_for(scan.cloud->points().size());
+  if (convergence == Convergence::kProvisional) {
+    icp.termination.min_translation_step_cm *= settings_.motion.provisional_step_factor;
+    icp.termination.min_rotation_step_deg *= settings_.motion.provisional_step_factor;
+  }
   return icp;
 }
 
 WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, const Pose& start,
-                                                  std::span<const WorldModel> models, float bound_cm) const {
-  const IcpSettings icp = icp_for(scan);
+                                                  std::span<const WorldModel> models, float bound_cm,
+                                                  Convergence convergence) const {
+  const IcpSettings icp = icp_for(scan, convergence);
   IcpSettings wide = icp;
   wide.max_pair_dist_cm = bound_cm;
   wide.refine_pair_dist_fraction = 0.0f;
@@ -45,13 +50,14 @@ WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, cons
 }
 
 ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& start,
-                                          const ModelsForBound& models_for, float start_bound_cm) const {
+                                          const ModelsForBound& models_for, float start_bound_cm,
+                                          Convergence convergence) const {
   ScanMatch match;
   float widest_cm = icp_.max_pair_dist_cm;
   if (start_bound_cm > widest_cm) {
     // The motion model's adaptive bound: the first match is a wide one, coarse to fine.
     const std::vector<WorldModel> models = models_for(start_bound_cm, start);
-    WideMatch wide = match_from_wide_bound(scan, start, models, start_bound_cm);
+    WideMatch wide = match_from_wide_bound(scan, start, models, start_bound_cm, convergence);
     match.iterations = wide.iterations;
     if (!wide.fine) {
       match.first = wide.failed;
@@ -62,7 +68,7 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
     widest_cm = start_bound_cm;
   } else {
     const std::vector<WorldModel> models = models_for(icp_.max_pair_dist_cm, start);
-    match.first = register_icp(backend_, *scan.cloud, start, models, icp_for(scan));
+    match.first = register_icp(backend_, *scan.cloud, start, models, icp_for(scan, convergence));
     match.iterations = match.first.iterations();
     if (!match.first.ok()) return match;
     match.health = judge(scan, match.first.world_from_data, start, models);
@@ -77,7 +83,7 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
     if (bound <= widest_cm) continue;
     widest_cm = bound;
     const std::vector<WorldModel> wide_models = models_for(bound, match.first.world_from_data);
-    WideMatch retry = match_from_wide_bound(scan, start, wide_models, bound);
+    WideMatch retry = match_from_wide_bound(scan, start, wide_models, bound, convergence);
     match.iterations += retry.iterations;
     if (!retry.fine) continue;
     if (retry.health.doubtful()) {

@@ -46,6 +46,10 @@ struct WideMatch {
 /// for the retries).
 using ModelsForBound = std::function<std::vector<WorldModel>(float bound_cm, const Pose& standing)>;
 
+/// How far a match converges: to ICP's least step (final), or to MotionSettings::
+/// provisional_step_factor times it (a sweep's first match, which tells its deskew the step).
+enum class Convergence { kFinal, kProvisional };
+
 class ScanRegistration {
  public:
   ScanRegistration(const MappingSettings& settings, ComputeBackend& backend)
@@ -58,12 +62,12 @@ class ScanRegistration {
   /// same start at each wider bound, until one is trusted. `start_bound_cm` wider than the pair
   /// bound (the motion model's adaptive bound): the first match already starts there, coarse to fine.
   ScanMatch register_scan(const PreparedScan& scan, const Pose& start, const ModelsForBound& models_for,
-                          float start_bound_cm = 0.0f) const;
+                          float start_bound_cm = 0.0f, Convergence convergence = Convergence::kFinal) const;
 
   /// ICP at `bound_cm` from `start` (no refinement), then the usual phases from where that ended,
   /// judged with the reach of the wide bound.
   WideMatch match_from_wide_bound(const PreparedScan& scan, const Pose& start, std::span<const WorldModel> models,
-                                  float bound_cm) const;
+                                  float bound_cm, Convergence convergence = Convergence::kFinal) const;
 
   /// The health of `scan` at `pose`, moved there from `start`, against `models`, at the pair bound
   /// (the reach test at `reach_bound_cm` when > 0).
@@ -72,8 +76,8 @@ class ScanRegistration {
 
  private:
   /// The ICP for `scan`: icp_, asking for no more pairs than the scan's size allows
-  /// (MappingSettings::min_pairs_for).
-  IcpSettings icp_for(const PreparedScan& scan) const;
+  /// (MappingSettings::min_pairs_for), converging as asked.
+  IcpSettings icp_for(const PreparedScan& scan, Convergence convergence) const;
 
   const MappingSettings& settings_;
   ComputeBackend& backend_;

@@ -105,13 +105,16 @@ void SurveyMatcher::restore_counters(const MappingResult& saved) {
   control_.times() = saved.times;
 }
 
-ScanMatch SurveyMatcher::match_pairwise(std::size_t i, const Pose& start, float start_bound_cm) const {
+ScanMatch SurveyMatcher::match_pairwise(std::size_t i, const Pose& start, float start_bound_cm,
+                                        Convergence convergence) const {
   const std::size_t previous[] = {i - 1};
   return registration_.register_scan(
-      state_.prepared(i), start, [&](float, const Pose&) { return state_.models_of(previous); }, start_bound_cm);
+      state_.prepared(i), start, [&](float, const Pose&) { return state_.models_of(previous); }, start_bound_cm,
+      convergence);
 }
 
-ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, float start_bound_cm) const {
+ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, float start_bound_cm,
+                                           Convergence convergence) const {
   // In the frame of scan i-1, so the metascan's float coordinates stay small wherever the survey
   // is; the metascans made for each bound live until the scan is registered.
   const Pose frame = state_.pose(i - 1);
@@ -133,12 +136,13 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, flo
         local_map_.metascan(state_, i, standing, frame, start, grow_cm, LocalMap::Scope::kEarlier, thin_cm));
     if (thin_cm > 0.0 && standing == start) last = {i, bound_cm, frame, start, metascans.back()};
     return std::vector<WorldModel>{{metascans.back().get(), frame}};
-  }, start_bound_cm);
+  }, start_bound_cm, convergence);
 }
 
-ScanMatch SurveyMatcher::match_from(std::size_t i, const Prediction& prediction) const {
-  return settings_.mode == MatchingMode::kIncremental ? match_incremental(i, prediction.start, prediction.start_bound_cm)
-                                                      : match_pairwise(i, prediction.start, prediction.start_bound_cm);
+ScanMatch SurveyMatcher::match_from(std::size_t i, const Prediction& prediction, Convergence convergence) const {
+  return settings_.mode == MatchingMode::kIncremental
+             ? match_incremental(i, prediction.start, prediction.start_bound_cm, convergence)
+             : match_pairwise(i, prediction.start, prediction.start_bound_cm, convergence);
 }
 
 void SurveyMatcher::place(std::size_t i, const ScanMatch& match, const Pose& start) {
@@ -151,7 +155,8 @@ void SurveyMatcher::place(std::size_t i, const ScanMatch& match, const Pose& sta
   state_.judged(i, match.health);
 }
 
-void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& prediction, ScanMatch& match) {
+void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& prediction, ScanMatch& match,
+                                      Convergence convergence) {
   const MotionSettings& motion = settings_.motion;
   if (!match.ok() || !match.retry || match.health.doubtful()) return;
   const PredictionError recent = motion_.recent_error(state_, i);
@@ -186,7 +191,7 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
     features_said_ = true;
     return;
   }
-  const ScanMatch second = match_from(i, other);
+  const ScanMatch second = match_from(i, other, convergence);
   step1_iterations_ += second.iterations;
   const Pose kept = match.retry->world_from_data;
   if (second.ok() && !second.health.doubtful()) {
@@ -223,7 +228,8 @@ const RecoveredStart& SurveyMatcher::features_start(std::size_t i) {
   return features_start_->second;
 }
 
-void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMatch& match, Pose& start) {
+void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMatch& match, Pose& start,
+                            Convergence convergence) {
   if (!recovery_on(i)) return;
   if (match.ok() && !match.health.doubtful()) return;
   // An odometry start is the user's: its match keeps its pose, and only its verdict may change
@@ -241,7 +247,7 @@ void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMat
   }
   Prediction from_features;
   from_features.start = found.start;
-  ScanMatch again = match_from(i, from_features);
+  ScanMatch again = match_from(i, from_features, convergence);
   step1_iterations_ += again.iterations;
   // A doubt that says the match may be stuck where its start left it (out of reach, not settled,
   // surfaces apart) is answered by a second start: two independent ones ending at one pose.
@@ -293,7 +299,8 @@ void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMat
   start = found.start;
 }
 
-void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTiming& timing) {
+void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTiming& timing,
+                                  Convergence convergence) {
   if (!state_.registered(i)) return;
   bool models_changed = false;
   if (i == 1 && first_sweep_) {
@@ -307,13 +314,13 @@ void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTim
   const std::optional<Pose>& used = state_.prepared(i).sweep_motion;
   const Pose change = used ? rigid_inverse(*used) * refined : refined;
   const MotionSettings& motion = settings_.motion;
-  if (!models_changed && translation_norm(change) < motion.refine_min_change_cm &&
-      rotation_angle_deg(change) < motion.refine_min_change_deg) {
-    return;
-  }
+  const bool deskew_again = models_changed || translation_norm(change) >= motion.refine_min_change_cm ||
+                            rotation_angle_deg(change) >= motion.refine_min_change_deg;
+  // A provisional match that the deskew keeps is still matched again, to ICP's least step.
+  if (!deskew_again && convergence == Convergence::kFinal) return;
   PreparedScan first = state_.prepared(i);
   const RegistrationHealth first_health = state_.health(i);
-  state_.set_prepared(i, preparation_.prepare(raw, control_, timing, refined));
+  if (deskew_again) state_.set_prepared(i, preparation_.prepare(raw, control_, timing, refined));
   Prediction here;
   here.start = state_.pose(i);
   here.start_bound_cm = settings_.pairwise_icp().max_pair_dist_cm;
@@ -341,13 +348,17 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
   const RunControl::Stopwatch arrived;
   control_.timed(&StageTimes::pairwise_s, [&] {
     const Prediction prediction = motion_.predict(state_, i);
-    ScanMatch match = match_from(i, prediction);
+    // A sweep's first matches need only tell its deskew the step; the refinement matches again.
+    const Convergence convergence = raw != nullptr && settings_.motion.provisional_step_factor > 1.0
+                                        ? Convergence::kProvisional
+                                        : Convergence::kFinal;
+    ScanMatch match = match_from(i, prediction, convergence);
     step1_iterations_ += match.iterations;
-    confirm_far_match(i, prediction, match);
+    confirm_far_match(i, prediction, match, convergence);
     Pose start = prediction.start;
-    recover(i, prediction, match, start);
+    recover(i, prediction, match, start, convergence);
     place(i, match, start);
-    if (raw != nullptr && timing != nullptr) refine_deskew(i, *raw, *timing);
+    if (raw != nullptr && timing != nullptr) refine_deskew(i, *raw, *timing, convergence);
   });
   if (settings_.mode == MatchingMode::kSimultaneous) {
     control_.timed(&StageTimes::relaxation_s, [&] {

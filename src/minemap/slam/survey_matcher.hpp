@@ -64,20 +64,22 @@ class SurveyMatcher {
   /// within the per-scan budget). `raw`: the sweep itself, to deskew again.
   void match_scan(std::size_t i, const Scan* raw = nullptr, const SweepTiming* timing = nullptr);
   /// Step 1 (and the pairwise mode): scan i against scan i-1. Incremental: against the metascan.
-  ScanMatch match_pairwise(std::size_t i, const Pose& start, float start_bound_cm) const;
-  ScanMatch match_incremental(std::size_t i, const Pose& start, float start_bound_cm) const;
-  ScanMatch match_from(std::size_t i, const Prediction& prediction) const;
+  /// `convergence`: provisional for a sweep's matches before its deskew is refined.
+  ScanMatch match_pairwise(std::size_t i, const Pose& start, float start_bound_cm, Convergence convergence) const;
+  ScanMatch match_incremental(std::size_t i, const Pose& start, float start_bound_cm, Convergence convergence) const;
+  ScanMatch match_from(std::size_t i, const Prediction& prediction,
+                       Convergence convergence = Convergence::kFinal) const;
   /// A retry that landed far from the prediction (MotionSettings::confirm_sigmas): matched again from
   /// another start (where the scan's features put it, in a sequence without odometry; else the
   /// other model's); doubtful unless both end at the same pose, or when the only other start lies
   /// within the retry's reach of the prediction (not independent).
-  void confirm_far_match(std::size_t i, const Prediction& prediction, ScanMatch& match);
+  void confirm_far_match(std::size_t i, const Prediction& prediction, ScanMatch& match, Convergence convergence);
   /// Scan i's match from the prediction failed or is doubtful (MappingSettings::recovery): it is
   /// registered again without a start and matched from there. Where both matches end at one pose
   /// and each doubt was one a start can cause (reach, surfaces apart, not settled), it is trusted.
   /// A constant-velocity start's `match` and `start` are replaced when the new match is trusted; an
   /// odometry start's pose is kept. A doubt says what was tried when it stays.
-  void recover(std::size_t i, const Prediction& prediction, ScanMatch& match, Pose& start);
+  void recover(std::size_t i, const Prediction& prediction, ScanMatch& match, Pose& start, Convergence convergence);
   /// Whether scan i may be recovered: recovery on, scan i-1 registered.
   bool recovery_on(std::size_t i) const;
   /// Where scan i's features put it (Recovery::find), computed once per scan.
@@ -85,8 +87,9 @@ class SurveyMatcher {
   /// Places scan i where `match` put it (or fails it at `start`).
   void place(std::size_t i, const ScanMatch& match, const Pose& start);
   /// A sweep registered: deskewed again by the step its match found, and matched again from there
-  /// where that moved it (kept when no worse). Scan 1 first deskews scan 0, by the same step.
-  void refine_deskew(std::size_t i, const Scan& raw, const SweepTiming& timing);
+  /// where that moved it (kept when no worse); a provisional match is matched again in any case.
+  /// Scan 1 first deskews scan 0, by the same step.
+  void refine_deskew(std::size_t i, const Scan& raw, const SweepTiming& timing, Convergence convergence);
   void relax(std::size_t newest, int budget);
 
   const MappingSettings& settings_;
