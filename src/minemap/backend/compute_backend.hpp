@@ -54,10 +54,11 @@ class ComputeBackend {
   /// CPU backend builds them in parallel (a survey's scans: each tree alone is too small to split
   /// well); this default builds them in turn.
   virtual std::vector<std::shared_ptr<const PreparedCloud>> prepare_many(
-      std::vector<std::vector<Eigen::Vector3f>> clouds_cm, const KdTreeSettings& tree_settings) {
+      std::vector<std::vector<Eigen::Vector3f>> clouds_cm, const KdTreeSettings& tree_settings,
+      TreeBuild when = TreeBuild::kNow) {
     std::vector<std::shared_ptr<const PreparedCloud>> prepared;
     prepared.reserve(clouds_cm.size());
-    for (auto& cloud : clouds_cm) prepared.push_back(prepare(std::move(cloud), tree_settings));
+    for (auto& cloud : clouds_cm) prepared.push_back(prepare(std::move(cloud), tree_settings, when));
     return prepared;
   }
 

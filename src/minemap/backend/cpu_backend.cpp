@@ -88,11 +88,11 @@ std::shared_ptr<const PreparedCloud> CpuBackend::prepare(std::vector<Eigen::Vect
 }
 
 std::vector<std::shared_ptr<const PreparedCloud>> CpuBackend::prepare_many(
-    std::vector<std::vector<Eigen::Vector3f>> clouds_cm, const KdTreeSettings& tree_settings) {
+    std::vector<std::vector<Eigen::Vector3f>> clouds_cm, const KdTreeSettings& tree_settings, TreeBuild when) {
   std::vector<std::shared_ptr<const PreparedCloud>> prepared(clouds_cm.size());
   // Building a tree touches nothing shared: one task per cloud, each tree the same as alone.
   tbb::parallel_for(std::size_t{0}, clouds_cm.size(), [&](std::size_t k) {
-    prepared[k] = std::make_shared<CpuPreparedCloud>(std::move(clouds_cm[k]), tree_settings);
+    prepared[k] = std::make_shared<CpuPreparedCloud>(std::move(clouds_cm[k]), tree_settings, when);
   });
   return prepared;
 }

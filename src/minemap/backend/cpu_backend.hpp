@@ -17,7 +17,8 @@ class CpuBackend final : public ComputeBackend {
                                                const KdTreeSettings& tree_settings,
                                                TreeBuild when = TreeBuild::kNow) override;
   std::vector<std::shared_ptr<const PreparedCloud>> prepare_many(std::vector<std::vector<Eigen::Vector3f>> clouds_cm,
-                                                                 const KdTreeSettings& tree_settings) override;
+                                                                 const KdTreeSettings& tree_settings,
+                                                                 TreeBuild when = TreeBuild::kNow) override;
   PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
                         const PairingSettings& settings) override;
   std::vector<NearestPair> nearest(const PreparedCloud& data, std::span<const ModelPlacement> models,

@@ -2,6 +2,8 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
+
 #include "minemap/filter/voxel_filter.hpp"
 
 namespace minemap::detail {
@@ -76,6 +78,13 @@ void ScanPreparation::keep_for_the_map(PreparedScan& prepared, const Scan& scan,
   }
 }
 
+TreeBuild ScanPreparation::model_trees_when() const {
+  // The metascan (incremental matching, the default) takes the scans' points into a tree of its
+  // own: their own trees are built only for a search that needs them (a loop's match). Pairwise
+  // matching and the relaxation search every model's tree: built at once, in parallel.
+  return settings_.mode == MatchingMode::kIncremental ? TreeBuild::kOnFirstUse : TreeBuild::kNow;
+}
+
 SweepTiming ScanPreparation::timing_of(const Scan& scan) const {
   if (settings_.motion.deskew == DeskewMode::kOff) return {};
   return sweep_timing(scan, settings_.motion.max_sweep_s);
@@ -105,14 +114,14 @@ PreparedScan ScanPreparation::prepare(const Scan& scan, RunControl& control, con
     prepared.sweep_s = timing.duration_s;
   }
   if (deskewing) prepared.sweep_motion = sweep_motion;
-  // A sweep's own trees wait for a search that needs them (most never come: it is matched against
-  // a metascan, and the metascans take its points); a scan prepared alone is searched at once.
-  const TreeBuild when = timing.empty() ? TreeBuild::kNow : TreeBuild::kOnFirstUse;
+  const TreeBuild model_trees = model_trees_when();
   control.timed(&StageTimes::tree_build_s, [&] {
-    prepared.cloud = backend_.prepare(std::move(reduced.data), settings_.tree, when);
+    prepared.cloud = backend_.prepare(std::move(reduced.data), settings_.tree,
+                                      reduced.has_model ? TreeBuild::kOnFirstUse : model_trees);
     prepared.model_cloud =
-        reduced.has_model ? backend_.prepare(std::move(reduced.model), settings_.tree, when) : prepared.cloud;
-    prepared.probe = reduced.has_probe ? backend_.prepare(std::move(reduced.probe), settings_.tree, when) : prepared.cloud;
+        reduced.has_model ? backend_.prepare(std::move(reduced.model), settings_.tree, model_trees) : prepared.cloud;
+    prepared.probe = reduced.has_probe ? backend_.prepare(std::move(reduced.probe), settings_.tree, TreeBuild::kOnFirstUse)
+                                       : prepared.cloud;
     if (settings_.needs_planes()) prepared.planes.emplace(prepared.model_cloud->points(), settings_.plane_cell_cm);
   });
   return prepared;
@@ -141,9 +150,13 @@ std::vector<PreparedScan> ScanPreparation::prepare_all(const std::vector<Scan>& 
   }
   // Every tree at once (the CPU backend builds them in parallel); clouds in scan order.
   control.timed(&StageTimes::tree_build_s, [&] {
-    auto data_clouds = backend_.prepare_many(std::move(data), settings_.tree);
-    auto model_clouds = backend_.prepare_many(std::move(models), settings_.tree);
-    auto probe_clouds = backend_.prepare_many(std::move(probes), settings_.tree);
+    // A data cloud that is also its scan's model is built as models are.
+    const TreeBuild model_trees = model_trees_when();
+    const bool any_alone = std::any_of(has_model.begin(), has_model.end(), [](bool b) { return !b; });
+    auto data_clouds = backend_.prepare_many(std::move(data), settings_.tree,
+                                             any_alone ? model_trees : TreeBuild::kOnFirstUse);
+    auto model_clouds = backend_.prepare_many(std::move(models), settings_.tree, model_trees);
+    auto probe_clouds = backend_.prepare_many(std::move(probes), settings_.tree, TreeBuild::kOnFirstUse);
     std::size_t next_model = 0, next_probe = 0;
     for (std::size_t i = 0; i < n; ++i) {
       PreparedScan& scan = prepared[i];

@@ -50,6 +50,8 @@ class ScanPreparation {
                        const std::optional<Pose>& sweep_motion = std::nullopt);
   /// The timing of a scan as MotionSettings::deskew asks (empty: not deskewed).
   SweepTiming timing_of(const Scan& scan) const;
+  /// When the scans' model trees are built (a data or probe tree: on first use, always).
+  TreeBuild model_trees_when() const;
   /// Every scan, in order (the voxel means in parallel, the trees in one prepare_many call each for
   /// data, models and probes); reports "filtering" after each scan is reduced.
   std::vector<PreparedScan> prepare_all(const std::vector<Scan>& scans, RunControl& control);
