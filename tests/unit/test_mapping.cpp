@@ -236,6 +236,53 @@ TEST(MappingLoops, AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot) {
   EXPECT_TRUE(unclosed_return);
 }
 
+/// Poses and every verdict alike, bit for bit.
+void expect_same_result(const MappingResult& a, const MappingResult& b) {
+  ASSERT_EQ(a.scans.size(), b.scans.size());
+  for (std::size_t i = 0; i < a.scans.size(); ++i) {
+    EXPECT_TRUE(a.scans[i].pose_cm == b.scans[i].pose_cm) << "scan " << i;
+    EXPECT_EQ(a.scans[i].health.doubt, b.scans[i].health.doubt) << "scan " << i;
+    EXPECT_EQ(a.scans[i].points_used, b.scans[i].points_used) << "scan " << i;
+    EXPECT_EQ(a.scans[i].points_in, b.scans[i].points_in) << "scan " << i;
+  }
+  EXPECT_EQ(a.step1_icp_iterations, b.step1_icp_iterations);
+}
+
+// The CLI lets each scan's points go once prepared (a sweep's once matched): the same map, and the
+// raw points are gone; the OpenCL backend keeps them (its failure matches again on the CPU). One
+// thread, so that the stop-and-go scans are prepared in several chunks (4 scans each).
+TEST(MappingSimulatedMine, LettingThePointsGoGivesTheSameMapAndFreesThem) {
+  tbb::task_arena one(1);
+  one.execute([] {
+    CpuBackend cpu;
+    const MappingSettings settings;
+    const auto survey = small_survey(10);
+    const MappingResult kept = map_survey(survey.scans, settings, cpu);
+    std::vector<Scan> scans = survey.scans;
+    const MappingResult released = map_survey_releasing_points(scans, settings, cpu);
+    expect_same_result(kept, released);
+    for (std::size_t i = 0; i < scans.size(); ++i) {
+      EXPECT_TRUE(scans[i].points_cm.empty() && scans[i].attributes.intensity.empty()) << "scan " << i;
+      EXPECT_EQ(scans[i].name, survey.scans[i].name);
+      EXPECT_FALSE(released.scans[i].used_points_cm->empty());
+    }
+    sim::MovingSimulationSettings moving;
+    moving.sensor = sim::MovingSensor::kHandheld;
+    moving.sweeps = 8;
+    const sim::MovingSurvey sweeps = sim::simulate_moving_survey(moving);
+    std::vector<Scan> sweep_scans = sweeps.scans;
+    expect_same_result(map_survey(sweeps.scans, settings, cpu),
+                       map_survey_releasing_points(sweep_scans, settings, cpu));
+    for (const Scan& sweep : sweep_scans) EXPECT_TRUE(sweep.points_cm.empty() && sweep.attributes.time_s.empty());
+  });
+  auto opencl = test::opencl_backend();  // throws without OpenCL: the test fails, never skips
+  const auto survey = small_survey(3);
+  std::vector<Scan> scans = survey.scans;
+  expect_same_result(map_survey(survey.scans, MappingSettings{}, *opencl),
+                     map_survey_releasing_points(scans, MappingSettings{}, *opencl));
+  for (std::size_t i = 0; i < scans.size(); ++i) EXPECT_EQ(scans[i].points_cm, survey.scans[i].points_cm);
+}
+
 class MappingBackendsAgree : public ::testing::TestWithParam<const char*> {};
 
 // The default (voxel means, metascan) and the paper's relaxation on slice-filtered scans.

@@ -88,7 +88,9 @@ MapRun map_read_survey(const MapCommand& command, io::Survey survey, double load
   run.backend = make_backend_for(options);
   if (!options.quiet) print_survey(options, run);
   run.result = with_threads(options, [&] {
-    return map_survey(run.survey.scans, command.settings, *run.backend.backend, progress, stop_requested);
+    // The scans' points are let go as they are prepared: the outputs need only the reduced clouds.
+    return map_survey_releasing_points(run.survey.scans, command.settings, *run.backend.backend, progress,
+                                       stop_requested);
   });
   run.survey_scans = run.result.scans.size();
   if (run.result.interrupted) {

@@ -26,6 +26,15 @@ MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& 
   }
 }
 
+MappingResult map_survey_releasing_points(std::vector<Scan>& scans, const MappingSettings& settings,
+                                          ComputeBackend& backend, const ProgressCallback& progress,
+                                          const StopRequested& stop_requested) {
+  if (backend.name() != "cpu") return map_survey(scans, settings, backend, progress, stop_requested);
+  settings.validate();
+  if (scans.empty()) throw std::invalid_argument("the survey holds no scans");
+  return detail::SurveyMatcher(settings, backend, {progress, stop_requested}).run(scans, &scans);
+}
+
 struct LiveMapper::Impl {
   Impl(const MappingSettings& settings_in, ComputeBackend& backend, StopRequested stop)
       : settings(settings_in), matcher(settings, backend, {{}, std::move(stop)}) {}

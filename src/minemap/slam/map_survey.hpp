@@ -32,6 +32,15 @@ namespace minemap {
 MappingResult map_survey(const std::vector<Scan>& scans, const MappingSettings& settings, ComputeBackend& backend,
                          const ProgressCallback& progress = {}, const StopRequested& stop_requested = {});
 
+/// map_survey, letting the scans' points go: each scan's points and attributes are freed as soon as
+/// it is prepared (a moving sensor's sweep once it is matched), so a survey's raw points are not held
+/// beside its reduced clouds while it is matched; names, sources and poses stay. The same result.
+/// On a backend other than the CPU the points are kept: a device failure matches everything again
+/// on the CPU, from them.
+MappingResult map_survey_releasing_points(std::vector<Scan>& scans, const MappingSettings& settings,
+                                          ComputeBackend& backend, const ProgressCallback& progress = {},
+                                          const StopRequested& stop_requested = {});
+
 namespace detail {
 class SurveyMatcher;
 }

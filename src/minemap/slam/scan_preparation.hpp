@@ -3,14 +3,15 @@
 // out. A scan is reduced as MappingSettings say (voxel means, or the paper's slice filter, or every
 // n-th point of a scan without slices), with a denser model cloud where the settings ask for one
 // and the health check's probe; then each cloud gets its kd-tree on the backend, and the model its
-// planes. map_survey prepares every scan at once (prepare_all: the voxel means in parallel, every
-// tree in one prepare_many call); `minemap watch` one at a time (prepare): both reduce each scan
-// with the same function and build the same trees.
+// planes. map_survey prepares the scans a chunk at a time (prepare_all: the voxel means in parallel,
+// the chunk's trees in one prepare_many call); `minemap watch` one at a time (prepare): both reduce
+// each scan with the same function and build the same trees.
 //
 // Thread-safety: uses the backend, one thread at a time.
 #include <limits>
 #include <memory>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include "minemap/backend/compute_backend.hpp"
@@ -54,7 +55,8 @@ class ScanPreparation {
   TreeBuild model_trees_when() const;
   /// Every scan, in order (the voxel means in parallel, the trees in one prepare_many call each for
   /// data, models and probes); reports "filtering" after each scan is reduced.
-  std::vector<PreparedScan> prepare_all(const std::vector<Scan>& scans, RunControl& control);
+  /// `first`: the index of scans[0] in the survey (for the progress reports).
+  std::vector<PreparedScan> prepare_all(std::span<const Scan> scans, RunControl& control, std::size_t first = 0);
   /// True once a scan without slices skipped the slice filter it was asked for (a note).
   bool skipped_slice_filter() const { return skipped_slice_filter_; }
 

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <span>
+
+#include <tbb/task_arena.h>
 
 namespace minemap::detail {
 
@@ -27,7 +30,18 @@ void SurveyMatcher::append(const Scan& scan, PreparedScan prepared) {
   }
 }
 
-MappingResult SurveyMatcher::run(const std::vector<Scan>& scans) {
+namespace {
+
+/// Frees a scan's points and attributes (swapped out: clear() keeps the capacity).
+void release_points(Scan& scan) {
+  std::vector<Eigen::Vector3f>().swap(scan.points_cm);
+  std::vector<std::uint32_t>().swap(scan.slice_offsets);
+  scan.attributes = {};
+}
+
+}  // namespace
+
+MappingResult SurveyMatcher::run(const std::vector<Scan>& scans, std::vector<Scan>* release) {
   control_.expect(scans.size());
   const bool sweeps = std::any_of(scans.begin(), scans.end(), [&](const Scan& scan) {
     return settings_.motion.deskew != DeskewMode::kOff && !scan.attributes.time_s.empty();
@@ -42,12 +56,22 @@ MappingResult SurveyMatcher::run(const std::vector<Scan>& scans) {
         return result();
       }
       arrive(scans[i]);
+      if (release != nullptr) release_points((*release)[i]);
     }
     finish();
     return result();
   }
-  std::vector<PreparedScan> prepared = preparation_.prepare_all(scans, control_);
-  for (std::size_t i = 0; i < scans.size(); ++i) append(scans[i], std::move(prepared[i]));
+  // A chunk at a time, so that a survey's reduced clouds and its raw points are not all held at
+  // once (its voxel means in parallel within the chunk; the same clouds as all at once).
+  const std::size_t chunk = 4 * static_cast<std::size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  for (std::size_t first = 0; first < scans.size(); first += chunk) {
+    const std::span<const Scan> part(scans.data() + first, std::min(chunk, scans.size() - first));
+    std::vector<PreparedScan> prepared = preparation_.prepare_all(part, control_, first);
+    for (std::size_t k = 0; k < part.size(); ++k) {
+      append(part[k], std::move(prepared[k]));
+      if (release != nullptr) release_points((*release)[first + k]);
+    }
+  }
   for (std::size_t i = 1; i < scans.size(); ++i) {
     if (control_.stop_requested()) {
       // Scans 0..i-1 are final (a relaxation cut short leaves them where its last match put them).

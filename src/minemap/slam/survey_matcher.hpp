@@ -35,8 +35,11 @@ class SurveyMatcher {
   /// `settings` must outlive the matcher (and be valid: MappingSettings::validate).
   SurveyMatcher(const MappingSettings& settings, ComputeBackend& backend, RunControl control);
 
-  /// map_survey: every scan prepared at once (in parallel), then matched in order, then finished.
-  MappingResult run(const std::vector<Scan>& scans);
+  /// map_survey: the scans prepared a chunk at a time (in parallel within it), then matched in
+  /// order, then finished. `release` (the same scans, when the caller lets them go): each scan's
+  /// points and attributes are freed once it is prepared (a sweep's once it is matched); its name,
+  /// source and pose stay. The result is the same either way.
+  MappingResult run(const std::vector<Scan>& scans, std::vector<Scan>* release = nullptr);
   /// LiveMapper::add: one more scan, prepared alone (the same clouds as run's), then matched.
   void add(const Scan& scan);
   /// LiveMapper::restore: one more scan prepared, its outcome as a previous run left it.
