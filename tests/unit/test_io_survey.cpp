@@ -142,6 +142,11 @@ TEST(Survey, PcdAndPlyFoldersWithInitialPoses) {
   settings.initial_poses = poses_dir / "two.txt";
   expect_input_error([&] { io::read_survey(dir.path(), settings); }, {"two.txt", "has 2 poses, the survey has 3 scans"});
 
+  // The files are parsed at once (as uos'); the first broken one in name order is the one named.
+  write_text(dir / "c_third.pcd", "VERSION 0.7\nFIELDS x y z\nbroken\n");
+  write_text(dir / "b_second.pcd", "VERSION 0.7\nFIELDS x y z\nbroken\n");
+  expect_input_error([&] { io::read_survey(dir.path()); }, {(dir / "b_second.pcd").string()});
+
   TempDir ply_dir;
   io::write_ply(ply_dir / "map.ply", scans[0].points_cm, true, LengthUnit::kMetre);
   survey = io::read_survey(ply_dir.path());

@@ -220,20 +220,6 @@ struct DroppedPoints {
   std::uint64_t total = 0;
 };
 
-/// Reads one scan file with `read`, counting the NaN points it drops.
-template <class Read>
-Scan read_counting(const fs::path& path, const ReadSettings& settings, DroppedPoints& dropped, Read&& read) {
-  ReadReport report;
-  ReadSettings counted = settings;
-  counted.report = &report;
-  Scan scan = read(path, counted);
-  if (report.nan_points_dropped > 0) {
-    dropped.files.emplace_back(path.filename().string(), report.nan_points_dropped);
-    dropped.total += report.nan_points_dropped;
-  }
-  return scan;
-}
-
 /// Reads every file with `read` at once (TBB over files: parsing text is most of the reading time),
 /// and returns the scans in the order of `paths`. A file that fails is reported as a sequential
 /// read would report it: the first failing file in order throws, after its predecessors' results
@@ -546,42 +532,27 @@ void read_native_survey(const fs::path& dir, const SurveyReadSettings& settings,
     read_uos_layout(dir, content, settings, survey, dropped);
     for (const auto& entry : content.uos) numbers.push_back(entry.first);
     name_of = [](std::uint64_t number) { return uos_stem(static_cast<std::size_t>(number)); };
-  } else if (!content.pcd.empty()) {
-    survey.format = "pcd";
+  } else if (!content.pcd.empty() || !content.ply.empty() || !content.xyz.empty()) {
+    // Every file at once, as uos' (each scan read alone: the same scans as one after another).
+    const std::vector<fs::path>& paths = !content.pcd.empty() ? content.pcd
+                                         : !content.ply.empty() ? content.ply
+                                                                : content.xyz;
+    survey.format = !content.pcd.empty() ? "pcd" : !content.ply.empty() ? "ply" : "xyz";
     survey.unit = read.unit.value_or(LengthUnit::kMetre);
-    for (const fs::path& path : content.pcd) {  // pose = VIEWPOINT
-      survey.scans.push_back(
-          read_counting(path, read, dropped, [](const fs::path& p, const ReadSettings& s) { return read_pcd(p, s); }));
-    }
-  } else if (!content.ply.empty()) {
-    survey.format = "ply";
-    survey.unit = read.unit.value_or(LengthUnit::kMetre);
-    for (const fs::path& path : content.ply) {
-      survey.scans.push_back(
-          read_counting(path, read, dropped, [](const fs::path& p, const ReadSettings& s) { return read_ply(p, s); }));
-    }
-  } else if (!content.xyz.empty()) {
-    survey.format = "xyz";
-    survey.unit = read.unit.value_or(LengthUnit::kMetre);
-    for (const fs::path& path : content.xyz) {
-      survey.scans.push_back(
-          read_counting(path, read, dropped, [](const fs::path& p, const ReadSettings& s) { return read_xyz(p, s); }));
-    }
+    ParallelReads reads(paths, read, [&](const fs::path& p, const ReadSettings& s) {
+      return read_scan_file(p, survey.format, s);  // a PCD's pose: its VIEWPOINT
+    });
+    for (std::size_t k = 0; k < paths.size(); ++k) survey.scans.push_back(reads.take(k, dropped));
   } else {
     survey.format = "kitti";
     survey.unit = read.unit.value_or(LengthUnit::kMetre);
-    for (const fs::path& path : content.kitti_bin) {
-      survey.scans.push_back(read_counting(path, read, dropped, [](const fs::path& p, const ReadSettings& s) {
-        return read_kitti_bin(p, s, 4);
-      }));
-      numbers.push_back(kitti_number(path));
-    }
-    for (const fs::path& folder : content.kitti_xyz_dirs) {
-      Scan scan = read_counting(folder / "points.bin", read, dropped,
-                                [](const fs::path& p, const ReadSettings& s) { return read_kitti_bin(p, s, 3); });
-      scan.name = folder.filename().string();  // "000002", not "points"
-      survey.scans.push_back(std::move(scan));
-      numbers.push_back(kitti_number(folder));
+    std::vector<fs::path> paths = content.kitti_bin;
+    for (const fs::path& folder : content.kitti_xyz_dirs) paths.push_back(folder / "points.bin");
+    ParallelReads reads(paths, read, [](const fs::path& p, const ReadSettings& s) { return read_scan_file(p, "kitti", s); });
+    for (std::size_t k = 0; k < paths.size(); ++k) {
+      survey.scans.push_back(reads.take(k, dropped));
+      // NNNNNN.bin or NNNNNN/points.bin (read_scan_file names the latter by its folder)
+      numbers.push_back(kitti_number(k < content.kitti_bin.size() ? paths[k] : paths[k].parent_path()));
     }
     // Both KITTI layouts in one folder would interleave; numbers are only meaningful for one.
     if (!content.kitti_bin.empty() && !content.kitti_xyz_dirs.empty()) numbers.clear();
