@@ -53,6 +53,74 @@ TEST(Survey, UosRoundTripKeepsPointsSlicesPosesAndTruth) {
   EXPECT_FALSE(io::read_survey(dir.path()).truth_cm.has_value());
 }
 
+// A long survey is read a part at a time (`map` on the CPU): each part is the scans read_survey reads
+// (poses, the world origin the first scan chose), handed over before the next is parsed, and may be
+// freed; what needs every scan (truth, duplicates, units) still holds.
+TEST(Survey, ReadInPartsIsReadAllAtOnceAndFreesWhatItHandsOver) {
+  TempDir dir;
+  auto scans = sample_scans(5);
+  std::vector<Pose> truth;
+  for (Scan& scan : scans) {
+    scan.pose_cm(0, 3) += 3.0e7;  // world coordinates: 300 km east
+    truth.push_back(scan.pose_cm * euler_to_pose({Eigen::Vector3d(1, 2, 3), Eigen::Vector3d(0, 0, 1)}));
+  }
+  io::write_uos_survey(dir.path(), scans, truth);
+  const io::Survey whole = io::read_survey(dir.path());
+  ASSERT_FALSE(whole.origin_cm.isZero());
+  std::vector<std::size_t> firsts;
+  const auto freeing = [&](std::vector<Scan>& part, std::size_t first, std::size_t total) {
+    EXPECT_EQ(total, 5u);
+    firsts.push_back(first);
+    for (std::size_t k = 0; k < part.size(); ++k) {
+      const Scan& expected = whole.scans[first + k];
+      EXPECT_EQ(part[k].name, expected.name);
+      EXPECT_EQ(part[k].points_cm, expected.points_cm);
+      EXPECT_EQ(part[k].local_origin_cm, expected.local_origin_cm);
+      EXPECT_EQ(part[k].pose_cm, expected.pose_cm);
+      std::vector<Eigen::Vector3f>().swap(part[k].points_cm);
+    }
+    return true;
+  };
+  const io::Survey parts = io::read_survey_in_parts(dir.path(), {}, 2, freeing);
+  EXPECT_EQ(firsts, (std::vector<std::size_t>{0, 2, 4}));
+  EXPECT_EQ(parts.origin_cm, whole.origin_cm);
+  EXPECT_EQ(parts.format, whole.format);
+  EXPECT_EQ(parts.warnings, whole.warnings);
+  ASSERT_TRUE(parts.truth_cm.has_value());
+  EXPECT_EQ(*parts.truth_cm, *whole.truth_cm);
+  ASSERT_EQ(parts.scans.size(), 5u);
+  for (const Scan& scan : parts.scans) EXPECT_TRUE(scan.points_cm.empty());
+
+  // A copy of scan000 as scan004, in another part: found though both scans' points were freed.
+  const auto original = test::read_text(dir / "scan004.3d");
+  std::filesystem::copy_file(dir / "scan000.3d", dir / "scan004.3d", std::filesystem::copy_options::overwrite_existing);
+  const auto just_freeing = [](std::vector<Scan>& part, std::size_t, std::size_t) {
+    for (Scan& scan : part) std::vector<Eigen::Vector3f>().swap(scan.points_cm);
+    return true;
+  };
+  expect_input_error([&] { io::read_survey_in_parts(dir.path(), {}, 2, just_freeing); },
+                     {(dir / "scan004.3d").string(), "exactly the same", "scan000.3d"});
+  expect_input_error([&] { io::read_survey(dir.path()); }, {(dir / "scan004.3d").string(), "exactly the same"});
+  // A broken file in the third part: the parts before it were handed over, then the file is named.
+  write_text(dir / "scan004.3d", "1 2 3\nbroken line\n");
+  std::size_t handed = 0;
+  const auto counting = [&](std::vector<Scan>& part, std::size_t, std::size_t) {
+    handed += part.size();
+    return true;
+  };
+  expect_input_error([&] { io::read_survey_in_parts(dir.path(), {}, 2, counting); },
+                     {(dir / "scan004.3d").string() + ":2:"});
+  EXPECT_EQ(handed, 4u);
+  // A consumer that stops (an interrupted run): no further part is read, nothing checked as a whole.
+  write_text(dir / "scan004.3d", original);
+  handed = 0;
+  const io::Survey stopped = io::read_survey_in_parts(
+      dir.path(), {}, 2, [&](std::vector<Scan>& part, std::size_t, std::size_t) { return (handed += part.size()) < 2; });
+  EXPECT_EQ(handed, 2u);
+  EXPECT_EQ(stopped.scans.size(), 2u);
+  EXPECT_THROW(io::read_survey_in_parts(dir.path(), {}, 0, counting), std::invalid_argument);
+}
+
 TEST(Survey, UosNumberingGapsKeepNumberOrder) {
   TempDir dir;
   const auto scans = sample_scans(3);

@@ -283,6 +283,47 @@ TEST(MappingSimulatedMine, LettingThePointsGoGivesTheSameMapAndFreesThem) {
   for (std::size_t i = 0; i < scans.size(); ++i) EXPECT_EQ(scans[i].points_cm, survey.scans[i].points_cm);
 }
 
+/// PartwiseMapper fed `scans` in parts of `part_scans`, as the CLI feeds it what it reads.
+MappingResult map_in_parts(const std::vector<Scan>& scans, std::size_t part_scans, const MappingSettings& settings,
+                           ComputeBackend& backend, const StopRequested& stop = {}) {
+  PartwiseMapper mapper(settings, backend, {}, stop);
+  for (std::size_t first = 0; first < scans.size(); first += part_scans) {
+    std::vector<Scan> part(scans.begin() + static_cast<std::ptrdiff_t>(first),
+                           scans.begin() + static_cast<std::ptrdiff_t>(std::min(scans.size(), first + part_scans)));
+    if (!mapper.add(part, scans.size())) break;
+    for (const Scan& scan : part) EXPECT_TRUE(scan.points_cm.empty());
+  }
+  return mapper.finish();
+}
+
+// A survey read a part at a time (the CLI on the CPU) maps as the whole survey at once, stop-and-go
+// and sweeps alike, with parts smaller and larger than the matcher's own chunks; a stop requested
+// mid-run keeps the scans matched before it, as map_survey does.
+TEST(MappingSimulatedMine, ASurveyMappedPartByPartIsTheSurveyMappedAtOnce) {
+  CpuBackend cpu;
+  const MappingSettings settings;
+  const auto survey = small_survey(10);
+  const MappingResult whole = map_survey(survey.scans, settings, cpu);
+  for (const std::size_t part_scans : {std::size_t{1}, std::size_t{3}, std::size_t{16}}) {
+    SCOPED_TRACE(part_scans);
+    expect_same_result(whole, map_in_parts(survey.scans, part_scans, settings, cpu));
+  }
+  sim::MovingSimulationSettings moving;
+  moving.sensor = sim::MovingSensor::kSpinning;
+  moving.sweeps = 8;
+  const sim::MovingSurvey sweeps = sim::simulate_moving_survey(moving);
+  expect_same_result(map_survey(sweeps.scans, settings, cpu), map_in_parts(sweeps.scans, 3, settings, cpu));
+  int asked = 0;
+  const StopRequested stop_at_the_sixth = [&] { return ++asked > 5; };
+  const MappingResult stopped = map_in_parts(survey.scans, 3, settings, cpu, stop_at_the_sixth);
+  EXPECT_TRUE(stopped.interrupted);
+  EXPECT_GE(stopped.scans_matched, 2u);
+  EXPECT_LT(stopped.scans_matched, 10u);
+  for (std::size_t i = 0; i < stopped.scans_matched; ++i) {
+    EXPECT_TRUE(stopped.scans[i].pose_cm == whole.scans[i].pose_cm) << "scan " << i;
+  }
+}
+
 class MappingBackendsAgree : public ::testing::TestWithParam<const char*> {};
 
 // The default (voxel means, metascan) and the paper's relaxation on slice-filtered scans.

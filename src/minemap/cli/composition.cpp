@@ -77,28 +77,78 @@ std::vector<OptionInfo> map_options(Preset preset) {
   return list;
 }
 
-MapRun map_read_survey(const MapCommand& command, io::Survey survey, double load_s, const ProgressCallback& progress,
-                       const StopRequested& stop_requested) {
-  const MapOptions& options = command.options;
-  MapRun run;
-  run.survey = std::move(survey);
-  run.sources = sources_of(run.survey);
-  run.load_s = load_s;
-  // The composition root: the backend is made here, from the options and the environment.
-  run.backend = make_backend_for(options);
-  if (!options.quiet) print_survey(options, run);
-  run.result = with_threads(options, [&] {
-    // The scans' points are let go as they are prepared: the outputs need only the reduced clouds.
-    return map_survey_releasing_points(run.survey.scans, command.settings, *run.backend.backend, progress,
-                                       stop_requested);
-  });
+namespace {
+
+/// A mapped run's survey-wide figures: how many scans, the interrupted run cut to what it matched,
+/// the comparison with the truth.
+void finish_run(MapRun& run) {
   run.survey_scans = run.result.scans.size();
   if (run.result.interrupted) {
     run.result.scans.resize(run.result.scans_matched);
     if (run.survey.truth_cm) run.survey.truth_cm->resize(run.result.scans_matched);
   }
   run.truth = compare_with_truth(run.result, run.survey.truth_cm);
+}
+
+MapRun map_with(const MapCommand& command, io::Survey survey, double load_s, BackendChoice backend,
+                const ProgressCallback& progress, const StopRequested& stop_requested) {
+  const MapOptions& options = command.options;
+  MapRun run;
+  run.survey = std::move(survey);
+  run.sources = sources_of(run.survey);
+  run.load_s = load_s;
+  run.backend = std::move(backend);
+  if (!options.quiet) print_survey(options, run);
+  run.result = with_threads(options, [&] {
+    // The scans' points are let go as they are prepared: the outputs need only the reduced clouds.
+    return map_survey_releasing_points(run.survey.scans, command.settings, *run.backend.backend, progress,
+                                       stop_requested);
+  });
+  finish_run(run);
   return run;
+}
+
+/// The survey read a part at a time and each part mapped as it comes (PartwiseMapper): its raw
+/// points are never all held. The console's survey lines come after the matching.
+MapRun map_in_parts(const MapCommand& command, BackendChoice backend, const ProgressCallback& progress,
+                    const StopRequested& stop_requested) {
+  const MapOptions& options = command.options;
+  MapRun run;
+  run.backend = std::move(backend);
+  using Clock = std::chrono::steady_clock;
+  double read_s = 0.0;
+  std::size_t survey_scans = 0;  // the folder's, however many were read before a stop
+  with_threads(options, [&] {
+    PartwiseMapper mapper(command.settings, *run.backend.backend, progress, stop_requested);
+    auto reading = Clock::now();
+    // A part of 4 scans a thread: the files are parsed in parallel, and matched as the next is read.
+    const std::size_t part_scans = 4 * static_cast<std::size_t>(thread_count(options));
+    run.survey = io::read_survey_in_parts(
+        options.survey, survey_read_settings(options, command.settings), part_scans,
+        [&](std::vector<Scan>& part, std::size_t, std::size_t total) {
+          read_s += std::chrono::duration<double>(Clock::now() - reading).count();
+          survey_scans = total;
+          const bool go = mapper.add(part, total);
+          reading = Clock::now();
+          return go;
+        });
+    read_s += std::chrono::duration<double>(Clock::now() - reading).count();
+    run.result = mapper.finish();
+  });
+  run.load_s = read_s;
+  run.sources = sources_of(run.survey);
+  if (!options.quiet) print_survey(options, run);
+  finish_run(run);
+  run.survey_scans = std::max(run.survey_scans, survey_scans);
+  return run;
+}
+
+}  // namespace
+
+MapRun map_read_survey(const MapCommand& command, io::Survey survey, double load_s, const ProgressCallback& progress,
+                       const StopRequested& stop_requested) {
+  // The composition root: the backend is made here, from the options and the environment.
+  return map_with(command, std::move(survey), load_s, make_backend_for(command.options), progress, stop_requested);
 }
 
 void check_output_folder(const std::filesystem::path& out, const std::filesystem::path& survey) {
@@ -132,10 +182,14 @@ MapRun run_map_command(const MapCommand& command, const ProgressCallback& progre
   // Read everything before touching the output folder: bad input leaves it as it was. Whether it
   // can be written is asked first, so a long run does not end in a folder it cannot use.
   check_output_folder(command.options.out, command.options.survey);
+  BackendChoice backend = make_backend_for(command.options);
+  // On the CPU the survey is read and mapped a part at a time. A device keeps every scan: its
+  // failure matches the whole survey again on the CPU (map_survey).
+  if (backend.backend->name() == "cpu") return map_in_parts(command, std::move(backend), progress, stop_requested);
   const auto start = std::chrono::steady_clock::now();
   io::Survey survey = io::read_survey(command.options.survey, survey_read_settings(command.options, command.settings));
   const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  return map_read_survey(command, std::move(survey), load_s, progress, stop_requested);
+  return map_with(command, std::move(survey), load_s, std::move(backend), progress, stop_requested);
 }
 
 MapOutputSettings output_settings(const MapCommand& command, const MapRun& run) {

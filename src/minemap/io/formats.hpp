@@ -254,6 +254,21 @@ inline constexpr std::size_t kUnitCheckMinPoints = 100;
 /// the numbering and dropped NaN points are Survey::warnings.
 Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings = {});
 
+/// Called with each part of a survey read in parts: its scans (which it may change, and whose points
+/// it may free), the index of its first scan and the survey's number of scans. false: read no more.
+using SurveyPartConsumer = std::function<bool(std::vector<Scan>& part, std::size_t first, std::size_t total)>;
+
+/// read_survey, `part_scans` files at a time (a long survey's raw points are never all held): each
+/// part is parsed (in parallel), given its poses and the survey's local origin, checked alone (too
+/// few points, all points identical) and handed to `consume` before the next is read. The survey's
+/// scans are returned as `consume` left them. What needs every scan comes after the last part: truth,
+/// reference poses, duplicates (files whose points were freed are read again to compare), the units
+/// check, the warnings; so a bad file late in the survey is reported after the parts before it were
+/// consumed. A consumer that returns false stops the reading: the survey then holds the parts read,
+/// unchecked as a whole. LAS/LAZ and E57 surveys come as one part.
+Survey read_survey_in_parts(const fs::path& dir, const SurveyReadSettings& settings, std::size_t part_scans,
+                            const SurveyPartConsumer& consume);
+
 /// Reads one scan file of a survey of `format` ("uos": a .3d, "pcd", "ply", "kitti": a .bin, or a
 /// NNNNNN/points.bin of x y z only) as read_survey reads it: points, slices and attributes, named as
 /// read_survey names it; its pose is not read (an export takes it from report.json).

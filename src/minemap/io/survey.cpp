@@ -257,50 +257,6 @@ class ParallelReads {
   const std::vector<fs::path>& paths_;
 };
 
-void read_uos_layout(const fs::path& dir, const FolderContent& content, const SurveyReadSettings& settings, Survey& survey,
-                     DroppedPoints& dropped) {
-  const bool need_pose_files = !settings.initial_poses.has_value();
-  std::size_t truth_files = 0;
-  std::vector<fs::path> paths;
-  for (const auto& entry : content.uos) paths.push_back(entry.second);
-  ParallelReads reads(paths, settings.read, [](const fs::path& p, const ReadSettings& s) { return read_uos_points(p, s); });
-  std::size_t detected = 0;
-  for (std::size_t k = 0; k < paths.size(); ++k) {
-    const fs::path& path = paths[k];
-    Scan scan = reads.take(k, dropped);
-    detected += reads.slices_detected(k) > 0 ? 1 : 0;
-    if (need_pose_files) {
-      const fs::path pose_path = fs::path(path).replace_extension(".pose");
-      if (!fs::exists(pose_path)) {
-        detail::fail_in_file(pose_path.string(),
-                             "missing: " + path.filename().string() + " needs its pose file (or give initial poses)",
-                             InputProblem::kInconsistentSurvey);
-      }
-      scan.pose_cm = read_pose_file(pose_path, survey.unit, settings.read);
-    }
-    truth_files += fs::exists(dir / "truth" / (scan.name + ".pose")) ? 1 : 0;
-    survey.scans.push_back(std::move(scan));
-  }
-  if (detected > 0) {
-    // Not a problem; said because it changes what the slice filter does with these files.
-    survey.warnings.push_back(std::to_string(detected) + " of " + std::to_string(paths.size()) +
-                              " uos files have no '# slice' markers: their slices were found from the scanner "
-                              "order of the points (--points-per-slice N sets them, --no-slice-detection leaves "
-                              "them without)");
-  }
-  if (truth_files == 0) return;
-  std::vector<Pose> truth;
-  for (const Scan& scan : survey.scans) {
-    const fs::path truth_path = dir / "truth" / (scan.name + ".pose");
-    if (!fs::exists(truth_path)) {
-      detail::fail_in_file(truth_path.string(), "missing: truth/ has poses for some scans, so it needs all of them",
-                           InputProblem::kInconsistentSurvey);
-    }
-    truth.push_back(read_pose_file(truth_path, survey.unit, settings.read));
-  }
-  survey.truth_cm = std::move(truth);
-}
-
 /// "scan001, scan004..scan006" for the numbers missing between the first and the last of `numbers`
 /// (sorted), named by `name_of`; empty when there is no gap.
 template <class NameOf>
@@ -337,8 +293,47 @@ std::uint64_t kitti_number(const fs::path& path) {
 
 std::string file_of(const Scan& scan) { return scan.source_path.empty() ? scan.name : scan.source_path; }
 
-/// Every scan needs kMinScanPoints points: fewer can never be registered.
-void check_scan_sizes(const std::vector<Scan>& scans) {
+/// What the checks of the survey as a whole need of a scan, kept after its points may be gone.
+struct ScanSummary {
+  std::string file;    ///< file_of(scan), for messages
+  fs::path parsed;     ///< the file parsed, to read again (empty: a foreign survey's scan)
+  std::size_t size = 0;
+  double diagonal_cm = 0.0;
+  std::uint64_t hash = 0;  ///< of the points' bits and the local origin as read
+};
+
+/// FNV-1a over the points' 32-bit words and the local origin: equal scans hash alike.
+std::uint64_t points_hash(const Scan& scan) {
+  std::uint64_t hash = 1469598103934665603ull;
+  const auto mix = [&hash](const void* data, std::size_t bytes) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (std::size_t b = 0; b + 4 <= bytes; b += 4) {
+      std::uint32_t word;
+      std::memcpy(&word, p + b, 4);
+      hash = (hash ^ word) * 1099511628211ull;
+    }
+  };
+  mix(scan.points_cm.data(), scan.points_cm.size() * sizeof(Eigen::Vector3f));
+  mix(scan.local_origin_cm.data(), 3 * sizeof(double));
+  return hash;
+}
+
+/// Bounding-box diagonal (cm).
+double diagonal_cm(const Scan& scan) {
+  if (scan.points_cm.empty()) return 0.0;
+  Eigen::Vector3f lo = scan.points_cm.front(), hi = scan.points_cm.front();
+  for (const Eigen::Vector3f& p : scan.points_cm) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  return (hi - lo).cast<double>().norm();
+}
+
+/// The checks of one part of the survey, in order (each scan needs kMinScanPoints points; a scan
+/// whose points all coincide has no shape to match: named here rather than left to fail as "no
+/// overlap"), and its scans' summaries (hash and diagonal in parallel: a pass over every point).
+void check_part(const std::vector<Scan>& scans, const std::vector<fs::path>& parsed,
+                std::vector<ScanSummary>& summaries) {
   for (const Scan& scan : scans) {
     if (scan.size() >= kMinScanPoints) continue;
     detail::fail_in_file(file_of(scan),
@@ -346,90 +341,71 @@ void check_scan_sizes(const std::vector<Scan>& scans) {
                              "; a scan needs at least " + std::to_string(kMinScanPoints) + " to be registered",
                          InputProblem::kEmpty);
   }
-}
-
-/// Two scans with exactly the same points are one file copied twice (a real scanner never repeats
-/// its noise); matching a scan against its copy would only hide the mistake.
-void check_duplicate_scans(const std::vector<Scan>& scans) {
-  // One hash per scan, in parallel (hashing is a pass over every point of the survey): FNV-1a over
-  // the points' 32-bit words and the local origin. Equal scans hash alike; equal hashes are compared.
-  std::vector<std::uint64_t> hashes(scans.size());
-  tbb::parallel_for(std::size_t{0}, scans.size(), [&](std::size_t i) {
-    std::uint64_t hash = 1469598103934665603ull;
-    const auto mix = [&hash](const void* data, std::size_t bytes) {
-      const auto* p = static_cast<const unsigned char*>(data);
-      for (std::size_t b = 0; b + 4 <= bytes; b += 4) {
-        std::uint32_t word;
-        std::memcpy(&word, p + b, 4);
-        hash = (hash ^ word) * 1099511628211ull;
-      }
-    };
-    mix(scans[i].points_cm.data(), scans[i].points_cm.size() * sizeof(Eigen::Vector3f));
-    mix(scans[i].local_origin_cm.data(), 3 * sizeof(double));
-    hashes[i] = hash;
+  const std::size_t first = summaries.size();
+  summaries.resize(first + scans.size());
+  tbb::parallel_for(std::size_t{0}, scans.size(), [&](std::size_t k) {
+    ScanSummary& summary = summaries[first + k];
+    summary.file = file_of(scans[k]);
+    summary.parsed = k < parsed.size() ? parsed[k] : fs::path{};
+    summary.size = scans[k].size();
+    summary.diagonal_cm = diagonal_cm(scans[k]);
+    summary.hash = points_hash(scans[k]);
   });
-  std::map<std::uint64_t, std::size_t> by_hash;
-  for (std::size_t i = 0; i < scans.size(); ++i) {
-    const Scan& scan = scans[i];
-    const auto [it, inserted] = by_hash.emplace(hashes[i], i);
-    if (inserted) continue;
-    const Scan& first = scans[it->second];
-    if (first.points_cm == scan.points_cm && first.local_origin_cm == scan.local_origin_cm) {
-      detail::fail_in_file(file_of(scan),
-                           "holds exactly the same " + std::to_string(scan.size()) + " points as " +
-                               fs::path(file_of(first)).filename().string() +
-                               " (a copied file?): remove one of them",
-                           InputProblem::kInconsistentSurvey);
-    }
+  for (std::size_t k = 0; k < scans.size(); ++k) {
+    if (summaries[first + k].diagonal_cm > 0.0) continue;
+    detail::fail_in_file(file_of(scans[k]),
+                         "all " + std::to_string(scans[k].size()) +
+                             " points are identical: no shape to register (remove the scan, or check its writer)",
+                         InputProblem::kEmpty);
   }
 }
 
-/// Each scan's bounding-box diagonal (cm), in parallel.
-std::vector<double> scan_diagonals_cm(const std::vector<Scan>& scans) {
-  std::vector<double> diagonals_cm(scans.size(), 0.0);
-  tbb::parallel_for(std::size_t{0}, scans.size(), [&](std::size_t i) {
-    const Scan& scan = scans[i];
-    if (scan.points_cm.empty()) return;
-    Eigen::Vector3f lo = scan.points_cm.front(), hi = scan.points_cm.front();
-    for (const Eigen::Vector3f& p : scan.points_cm) {
-      lo = lo.cwiseMin(p);
-      hi = hi.cwiseMax(p);
+/// Two scans with exactly the same points are one file copied twice (a real scanner never repeats
+/// its noise); matching a scan against its copy would only hide the mistake. Equal hashes are
+/// compared point by point: from the scans where both still hold their points, else both files
+/// are read again (a survey read in parts lets its points go).
+void check_duplicate_scans(const std::vector<ScanSummary>& summaries, const std::vector<Scan>& scans,
+                           const std::string& format, const ReadSettings& read) {
+  std::map<std::uint64_t, std::size_t> by_hash;
+  for (std::size_t i = 0; i < summaries.size(); ++i) {
+    const auto [it, inserted] = by_hash.emplace(summaries[i].hash, i);
+    if (inserted) continue;
+    const std::size_t j = it->second;
+    bool same = false;
+    if (scans[i].size() == summaries[i].size && scans[j].size() == summaries[j].size) {
+      same = scans[j].points_cm == scans[i].points_cm && scans[j].local_origin_cm == scans[i].local_origin_cm;
+    } else if (!summaries[i].parsed.empty() && !summaries[j].parsed.empty()) {
+      const Scan a = read_scan_file(summaries[j].parsed, format, read), b = read_scan_file(summaries[i].parsed, format, read);
+      same = a.points_cm == b.points_cm && a.local_origin_cm == b.local_origin_cm;
     }
-    diagonals_cm[i] = (hi - lo).cast<double>().norm();
-  });
-  return diagonals_cm;
-}
-
-/// A scan whose points all coincide has no shape to match (a sensor that returned one range, a
-/// writer that repeated a point): named here rather than left to fail as "no overlap".
-void check_degenerate_scans(const std::vector<Scan>& scans, const std::vector<double>& diagonals_cm) {
-  for (std::size_t i = 0; i < scans.size(); ++i) {
-    if (diagonals_cm[i] > 0.0) continue;
-    detail::fail_in_file(file_of(scans[i]),
-                         "all " + std::to_string(scans[i].size()) +
-                             " points are identical: no shape to register (remove the scan, or check its writer)",
-                         InputProblem::kEmpty);
+    if (same) {
+      detail::fail_in_file(summaries[i].file,
+                           "holds exactly the same " + std::to_string(summaries[i].size) + " points as " +
+                               fs::path(summaries[j].file).filename().string() + " (a copied file?): remove one of them",
+                           InputProblem::kInconsistentSurvey);
+    }
   }
 }
 
 /// The units check (formats.hpp, kSuspiciousScanDiagonal_cm): only for the uos default unit. The
 /// median scan is judged, not the largest: one scan seeing 80 m down a drive, read as cm, still
 /// spans 80 "cm", and one stray far point must not make a metres survey pass.
-void check_units(const std::vector<Scan>& scans, const std::vector<double>& diagonals_cm) {
+void check_units(const std::vector<ScanSummary>& summaries) {
   std::vector<std::size_t> judged;
-  for (std::size_t i = 0; i < scans.size(); ++i) {
-    if (scans[i].size() >= kUnitCheckMinPoints) judged.push_back(i);
+  for (std::size_t i = 0; i < summaries.size(); ++i) {
+    if (summaries[i].size >= kUnitCheckMinPoints) judged.push_back(i);
   }
   if (judged.empty()) return;
+  const auto diagonal = [&](std::size_t i) { return summaries[i].diagonal_cm; };
   std::sort(judged.begin(), judged.end(), [&](std::size_t a, std::size_t b) {
-    return diagonals_cm[a] < diagonals_cm[b] || (diagonals_cm[a] == diagonals_cm[b] && a < b);
+    return diagonal(a) < diagonal(b) || (diagonal(a) == diagonal(b) && a < b);
   });
   const std::size_t median = judged[(judged.size() - 1) / 2];
-  if (diagonals_cm[median] >= kSuspiciousScanDiagonal_cm) return;
+  if (diagonal(median) >= kSuspiciousScanDiagonal_cm) return;
   char extent[96];
-  std::snprintf(extent, sizeof extent, "%.3g cm (the largest of the %zu scans: %.3g cm)", diagonals_cm[median],
-                judged.size(), diagonals_cm[judged.back()]);
-  detail::fail_in_file(file_of(scans[median]),
+  std::snprintf(extent, sizeof extent, "%.3g cm (the largest of the %zu scans: %.3g cm)", diagonal(median),
+                judged.size(), diagonal(judged.back()));
+  detail::fail_in_file(summaries[median].file,
                        std::string("the median scan spans only ") + extent +
                            ", read in cm, uos' default unit: a survey's scans span metres. Is it in metres? Map it "
                            "with --unit m (or --unit cm if it really is this small)",
@@ -476,37 +452,34 @@ void keep_range(FolderContent& content, const SurveyReadSettings& settings) {
   }
 }
 
-/// Moves a survey in world coordinates near zero (Survey::origin_cm): its origin is `given`, or the
-/// first scan's position rounded to kLocalOriginGrid_cm (100 m) when that lies beyond
-/// kWorldCoordinates_cm. The files'
-/// frame and the world both move by -origin: each scan's points keep their float values (their
-/// local origin moves), and each pose T_world_file becomes T(-o) T_world_file T(o), the identity
-/// staying the identity, so poses, views and .pose files stay near zero.
-void choose_local_origin(Survey& survey, const std::optional<Eigen::Vector3d>& given) {
-  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
-  if (given) {
-    origin = *given;
-  } else if (!survey.scans.empty()) {
-    const Eigen::Vector3d first = survey.scans.front().world_from_points().block<3, 1>(0, 3);
-    if (first.norm() > kWorldCoordinates_cm) origin = (first / kLocalOriginGrid_cm).array().round().matrix() * kLocalOriginGrid_cm;
-  }
-  survey.origin_cm = origin;
-  if (origin.isZero()) return;
-  const auto moved = [&](Pose pose) {  // T(-o) * pose * T(o)
-    pose.block<3, 1>(0, 3) += pose.block<3, 3>(0, 0) * origin - origin;
-    return pose;
-  };
-  for (Scan& scan : survey.scans) {
-    scan.local_origin_cm -= origin;
-    scan.pose_cm = moved(scan.pose_cm);
-  }
-  if (survey.truth_cm) {
-    for (Pose& pose : *survey.truth_cm) pose = moved(pose);
-  }
+/// A survey in world coordinates is moved near zero (Survey::origin_cm): its origin is `given`, or
+/// the first scan's position rounded to kLocalOriginGrid_cm (100 m) when that lies beyond
+/// kWorldCoordinates_cm. The files' frame and the world both move by -origin: each scan's points keep
+/// their float values (their local origin moves), and each pose T_world_file becomes
+/// T(-o) T_world_file T(o), the identity staying the identity, so poses, views and .pose files stay
+/// near zero.
+Eigen::Vector3d local_origin_for(const Scan& first, const std::optional<Eigen::Vector3d>& given) {
+  if (given) return *given;
+  const Eigen::Vector3d at = first.world_from_points().block<3, 1>(0, 3);
+  if (at.norm() > kWorldCoordinates_cm) return (at / kLocalOriginGrid_cm).array().round().matrix() * kLocalOriginGrid_cm;
+  return Eigen::Vector3d::Zero();
 }
 
-void read_native_survey(const fs::path& dir, const SurveyReadSettings& settings, Survey& survey, DroppedPoints& dropped,
-                        std::vector<std::uint64_t>& numbers, std::string (*&name_of)(std::uint64_t)) {
+Pose moved_to_origin(Pose pose, const Eigen::Vector3d& origin) {  // T(-o) * pose * T(o)
+  pose.block<3, 1>(0, 3) += pose.block<3, 3>(0, 0) * origin - origin;
+  return pose;
+}
+
+/// A native survey's files in reading order, and what its layout says of them.
+struct NativePlan {
+  std::string format;
+  LengthUnit unit = LengthUnit::kMetre;
+  std::vector<fs::path> paths;
+  std::vector<std::uint64_t> numbers;  ///< uos / KITTI scan numbers, for the gaps warning
+  std::string (*name_of)(std::uint64_t) = kitti_stem;
+};
+
+NativePlan plan_native_survey(const fs::path& dir, const SurveyReadSettings& settings) {
   FolderContent content = list_folder(dir);
   keep_range(content, settings);
   const int layouts = !content.uos.empty() + !content.pcd.empty() + !content.ply.empty() + !content.xyz.empty() +
@@ -526,41 +499,93 @@ void read_native_survey(const fs::path& dir, const SurveyReadSettings& settings,
                          InputProblem::kInconsistentSurvey);
   }
   const ReadSettings& read = settings.read;
+  NativePlan plan;
   if (!content.uos.empty()) {
-    survey.format = "uos";
-    survey.unit = read.unit.value_or(LengthUnit::kCentimetre);
-    read_uos_layout(dir, content, settings, survey, dropped);
-    for (const auto& entry : content.uos) numbers.push_back(entry.first);
-    name_of = [](std::uint64_t number) { return uos_stem(static_cast<std::size_t>(number)); };
+    plan.format = "uos";
+    plan.unit = read.unit.value_or(LengthUnit::kCentimetre);
+    for (const auto& entry : content.uos) {
+      plan.paths.push_back(entry.second);
+      plan.numbers.push_back(entry.first);
+    }
+    plan.name_of = [](std::uint64_t number) { return uos_stem(static_cast<std::size_t>(number)); };
   } else if (!content.pcd.empty() || !content.ply.empty() || !content.xyz.empty()) {
-    // Every file at once, as uos' (each scan read alone: the same scans as one after another).
-    const std::vector<fs::path>& paths = !content.pcd.empty() ? content.pcd
-                                         : !content.ply.empty() ? content.ply
-                                                                : content.xyz;
-    survey.format = !content.pcd.empty() ? "pcd" : !content.ply.empty() ? "ply" : "xyz";
-    survey.unit = read.unit.value_or(LengthUnit::kMetre);
-    ParallelReads reads(paths, read, [&](const fs::path& p, const ReadSettings& s) {
-      return read_scan_file(p, survey.format, s);  // a PCD's pose: its VIEWPOINT
-    });
-    for (std::size_t k = 0; k < paths.size(); ++k) survey.scans.push_back(reads.take(k, dropped));
+    plan.format = !content.pcd.empty() ? "pcd" : !content.ply.empty() ? "ply" : "xyz";  // a PCD's pose: VIEWPOINT
+    plan.unit = read.unit.value_or(LengthUnit::kMetre);
+    plan.paths = !content.pcd.empty() ? content.pcd : !content.ply.empty() ? content.ply : content.xyz;
   } else {
-    survey.format = "kitti";
-    survey.unit = read.unit.value_or(LengthUnit::kMetre);
-    std::vector<fs::path> paths = content.kitti_bin;
-    for (const fs::path& folder : content.kitti_xyz_dirs) paths.push_back(folder / "points.bin");
-    ParallelReads reads(paths, read, [](const fs::path& p, const ReadSettings& s) { return read_scan_file(p, "kitti", s); });
-    for (std::size_t k = 0; k < paths.size(); ++k) {
-      survey.scans.push_back(reads.take(k, dropped));
-      // NNNNNN.bin or NNNNNN/points.bin (read_scan_file names the latter by its folder)
-      numbers.push_back(kitti_number(k < content.kitti_bin.size() ? paths[k] : paths[k].parent_path()));
+    plan.format = "kitti";
+    plan.unit = read.unit.value_or(LengthUnit::kMetre);
+    plan.paths = content.kitti_bin;
+    for (const fs::path& path : content.kitti_bin) plan.numbers.push_back(kitti_number(path));
+    for (const fs::path& folder : content.kitti_xyz_dirs) {
+      plan.paths.push_back(folder / "points.bin");  // read_scan_file names it by its folder
+      plan.numbers.push_back(kitti_number(folder));
     }
     // Both KITTI layouts in one folder would interleave; numbers are only meaningful for one.
-    if (!content.kitti_bin.empty() && !content.kitti_xyz_dirs.empty()) numbers.clear();
-    const fs::path graph = dir / "graph.txt";
-    if (fs::exists(graph)) {
-      survey.truth_cm = read_pose_list(graph, survey.unit, survey.scans.size(), read, settings.first_scan, ranged(settings));
-    }
+    if (!content.kitti_bin.empty() && !content.kitti_xyz_dirs.empty()) plan.numbers.clear();
   }
+  return plan;
+}
+
+/// What reading the parts gathered for the survey as a whole.
+struct PartTally {
+  DroppedPoints dropped;
+  std::size_t slices_detected = 0;  ///< uos files without '# slice' markers
+  std::size_t truth_files = 0;      ///< uos truth/scanNNN.pose files present
+  std::vector<ScanSummary> summaries;
+};
+
+/// Parses plan.paths[first, first + count) at once (TBB over files: parsing text is most of the
+/// reading time); the first bad file in order is the one reported. uos: each scan's .pose file
+/// (unless initial poses are given).
+std::vector<Scan> read_native_part(const fs::path& dir, const NativePlan& plan, const SurveyReadSettings& settings,
+                                   std::size_t first, std::size_t count, PartTally& tally) {
+  const std::vector<fs::path> paths(plan.paths.begin() + static_cast<std::ptrdiff_t>(first),
+                                    plan.paths.begin() + static_cast<std::ptrdiff_t>(first + count));
+  ParallelReads reads(paths, settings.read,
+                      [&](const fs::path& p, const ReadSettings& s) { return read_scan_file(p, plan.format, s); });
+  std::vector<Scan> scans;
+  scans.reserve(paths.size());
+  for (std::size_t k = 0; k < paths.size(); ++k) {
+    Scan scan = reads.take(k, tally.dropped);
+    if (plan.format == "uos") {
+      tally.slices_detected += reads.slices_detected(k) > 0 ? 1 : 0;
+      if (!settings.initial_poses) {
+        const fs::path pose_path = fs::path(paths[k]).replace_extension(".pose");
+        if (!fs::exists(pose_path)) {
+          detail::fail_in_file(pose_path.string(),
+                               "missing: " + paths[k].filename().string() + " needs its pose file (or give initial poses)",
+                               InputProblem::kInconsistentSurvey);
+        }
+        scan.pose_cm = read_pose_file(pose_path, plan.unit, settings.read);
+      }
+      tally.truth_files += fs::exists(dir / "truth" / (scan.name + ".pose")) ? 1 : 0;
+    }
+    scans.push_back(std::move(scan));
+  }
+  return scans;
+}
+
+/// A native survey's reference poses of its own: uos truth/ (all or none), KITTI's graph.txt.
+std::optional<std::vector<Pose>> native_truth(const fs::path& dir, const NativePlan& plan, const Survey& survey,
+                                              const SurveyReadSettings& settings, const PartTally& tally) {
+  if (plan.format == "uos" && tally.truth_files > 0) {
+    std::vector<Pose> truth;
+    for (const Scan& scan : survey.scans) {
+      const fs::path truth_path = dir / "truth" / (scan.name + ".pose");
+      if (!fs::exists(truth_path)) {
+        detail::fail_in_file(truth_path.string(), "missing: truth/ has poses for some scans, so it needs all of them",
+                             InputProblem::kInconsistentSurvey);
+      }
+      truth.push_back(read_pose_file(truth_path, plan.unit, settings.read));
+    }
+    return truth;
+  }
+  const fs::path graph = dir / "graph.txt";
+  if (plan.format == "kitti" && fs::exists(graph)) {
+    return read_pose_list(graph, plan.unit, survey.scans.size(), settings.read, settings.first_scan, ranged(settings));
+  }
+  return std::nullopt;
 }
 }  // namespace
 
@@ -639,7 +664,12 @@ std::vector<std::string> ready_scan_names(const fs::path& dir) {
   return names;
 }
 
-Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
+namespace {
+
+/// read_survey and read_survey_in_parts: `part_scans` scans at a time, each part handed to
+/// `consume` (when given) once parsed and checked alone; the survey as a whole checked at the end.
+Survey read_in_parts(const fs::path& dir, const SurveyReadSettings& settings, std::size_t part_scans,
+                     const SurveyPartConsumer& consume) {
   if (settings.initial_poses) {
     std::error_code error;
     if (!fs::exists(*settings.initial_poses, error)) {
@@ -647,43 +677,105 @@ Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
                            InputProblem::kInconsistentSurvey);
     }
   }
-  Survey survey;
-  DroppedPoints dropped;
-  std::vector<std::uint64_t> numbers;  // uos / KITTI scan numbers in order, for the gaps warning
-  std::string (*name_of)(std::uint64_t) = kitti_stem;
   const ReadSettings& read = settings.read;
+  Survey survey;
+  PartTally tally;
+  std::optional<NativePlan> plan;
+  std::optional<std::vector<Pose>> initial;
+  std::size_t total = 0;
+  Survey foreign;
   if (is_foreign_survey(dir)) {
-    survey = read_foreign_survey(dir, settings);  // LAS/LAZ and E57 stay right-handed, z up
+    foreign = read_foreign_survey(dir, settings);  // LAS/LAZ and E57 stay right-handed, z up, their own origin
+    survey.format = foreign.format;
+    survey.unit = foreign.unit;
+    survey.origin_cm = foreign.origin_cm;
+    survey.truth_cm = std::move(foreign.truth_cm);
+    survey.warnings = std::move(foreign.warnings);
+    total = foreign.scans.size();
+    part_scans = total;  // read as one
   } else {
-    read_native_survey(dir, settings, survey, dropped, numbers, name_of);
+    plan = plan_native_survey(dir, settings);
+    survey.format = plan->format;
+    survey.unit = plan->unit;
     survey.frame_3dtk = survey.format == "uos" || read.right_handed_to_3dtk;
+    total = plan->paths.size();
   }
   if (settings.initial_poses) {
-    const std::vector<Pose> poses = read_pose_list(*settings.initial_poses, survey.unit, survey.scans.size(), read,
-                                                   settings.first_scan, ranged(settings));
-    for (std::size_t i = 0; i < poses.size(); ++i) survey.scans[i].pose_cm = poses[i];
+    initial = read_pose_list(*settings.initial_poses, survey.unit, total, read, settings.first_scan, ranged(settings));
+  }
+  const bool native = plan.has_value();
+  bool stopped = false;
+  for (std::size_t first = 0; first < total && !stopped; first += part_scans) {
+    const std::size_t count = std::min(part_scans, total - first);
+    std::vector<Scan> part = native ? read_native_part(dir, *plan, settings, first, count, tally)
+                                    : std::move(foreign.scans);
+    if (initial) {
+      for (std::size_t k = 0; k < part.size(); ++k) part[k].pose_cm = (*initial)[first + k];
+    }
+    if (native) {
+      if (first == 0) survey.origin_cm = local_origin_for(part.front(), settings.origin_cm);
+      if (!survey.origin_cm.isZero()) {
+        for (Scan& scan : part) {
+          scan.local_origin_cm -= survey.origin_cm;
+          scan.pose_cm = moved_to_origin(scan.pose_cm, survey.origin_cm);
+        }
+      }
+    }
+    const std::vector<fs::path> parsed =
+        native ? std::vector<fs::path>(plan->paths.begin() + static_cast<std::ptrdiff_t>(first),
+                                       plan->paths.begin() + static_cast<std::ptrdiff_t>(first + count))
+               : std::vector<fs::path>{};
+    check_part(part, parsed, tally.summaries);
+    if (consume) stopped = !consume(part, first, total);
+    for (Scan& scan : part) survey.scans.push_back(std::move(scan));
+  }
+  if (stopped) return survey;  // an interrupted run: what was read, unchecked as a whole
+
+  // The survey as a whole, now that every file parsed.
+  if (native) {
+    if (auto truth = native_truth(dir, *plan, survey, settings, tally)) {
+      for (Pose& pose : *truth) pose = moved_to_origin(pose, survey.origin_cm);
+      survey.truth_cm = std::move(truth);
+    }
   }
   if (settings.reference_poses) {
     survey.truth_cm = read_pose_list(*settings.reference_poses, survey.unit, survey.scans.size(), read,
                                      settings.first_scan, ranged(settings));
+    if (native) {
+      for (Pose& pose : *survey.truth_cm) pose = moved_to_origin(pose, survey.origin_cm);
+    }
   }
-  if (survey.format != "las" && survey.format != "laz" && survey.format != "e57") {
-    choose_local_origin(survey, settings.origin_cm);  // LAS/LAZ and E57 readers choose their own
+  check_duplicate_scans(tally.summaries, survey.scans, survey.format, read);
+  if (!read.unit && survey.unit == LengthUnit::kCentimetre) check_units(tally.summaries);
+  if (tally.slices_detected > 0) {
+    // Not a problem; said because it changes what the slice filter does with these files.
+    survey.warnings.push_back(std::to_string(tally.slices_detected) + " of " + std::to_string(total) +
+                              " uos files have no '# slice' markers: their slices were found from the scanner "
+                              "order of the points (--points-per-slice N sets them, --no-slice-detection leaves "
+                              "them without)");
   }
-
-  // The survey as a whole, now that every file parsed.
-  check_scan_sizes(survey.scans);
-  check_duplicate_scans(survey.scans);
-  const std::vector<double> diagonals_cm = scan_diagonals_cm(survey.scans);
-  check_degenerate_scans(survey.scans, diagonals_cm);
-  if (!read.unit && survey.unit == LengthUnit::kCentimetre) check_units(survey.scans, diagonals_cm);
-  std::sort(numbers.begin(), numbers.end());
-  if (const std::string gaps = describe_gaps(numbers, name_of); !gaps.empty()) {
-    survey.warnings.push_back("the scan numbering has gaps: no " + gaps +
-                              "; the scans on either side of a gap are matched to each other");
+  if (native) {
+    std::vector<std::uint64_t> numbers = plan->numbers;
+    std::sort(numbers.begin(), numbers.end());
+    if (const std::string gaps = describe_gaps(numbers, plan->name_of); !gaps.empty()) {
+      survey.warnings.push_back("the scan numbering has gaps: no " + gaps +
+                                "; the scans on either side of a gap are matched to each other");
+    }
   }
-  if (dropped.total > 0) survey.warnings.push_back(describe_dropped(dropped));
+  if (tally.dropped.total > 0) survey.warnings.push_back(describe_dropped(tally.dropped));
   return survey;
+}
+
+}  // namespace
+
+Survey read_survey(const fs::path& dir, const SurveyReadSettings& settings) {
+  return read_in_parts(dir, settings, std::numeric_limits<std::size_t>::max(), {});
+}
+
+Survey read_survey_in_parts(const fs::path& dir, const SurveyReadSettings& settings, std::size_t part_scans,
+                            const SurveyPartConsumer& consume) {
+  if (part_scans == 0) throw std::invalid_argument("read_survey_in_parts: a part holds at least one scan");
+  return read_in_parts(dir, settings, part_scans, consume);
 }
 
 void write_uos_survey(const fs::path& dir, std::span<const Scan> scans, const std::optional<std::vector<Pose>>& truth_cm) {

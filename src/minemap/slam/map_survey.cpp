@@ -35,6 +35,26 @@ MappingResult map_survey_releasing_points(std::vector<Scan>& scans, const Mappin
   return detail::SurveyMatcher(settings, backend, {progress, stop_requested}).run(scans, &scans);
 }
 
+PartwiseMapper::PartwiseMapper(const MappingSettings& settings, ComputeBackend& backend,
+                               const ProgressCallback& progress, const StopRequested& stop_requested)
+    : settings_(settings) {
+  settings_.validate();
+  matcher_ = std::make_unique<detail::SurveyMatcher>(settings_, backend, detail::RunControl{progress, stop_requested});
+}
+PartwiseMapper::~PartwiseMapper() = default;
+
+bool PartwiseMapper::add(std::vector<Scan>& part, std::size_t total) {
+  if (stopped_) return false;
+  stopped_ = !matcher_->add_part(part, total);
+  return !stopped_;
+}
+
+MappingResult PartwiseMapper::finish() {
+  if (matcher_->size() == 0) throw std::invalid_argument("the survey holds no scans");
+  if (!stopped_) matcher_->finish();
+  return matcher_->result();
+}
+
 struct LiveMapper::Impl {
   Impl(const MappingSettings& settings_in, ComputeBackend& backend, StopRequested stop)
       : settings(settings_in), matcher(settings, backend, {{}, std::move(stop)}) {}

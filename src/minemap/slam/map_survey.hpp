@@ -45,6 +45,28 @@ namespace detail {
 class SurveyMatcher;
 }
 
+/// map_survey fed a part at a time, as io::read_survey_in_parts reads a survey: each part is
+/// prepared and matched as it arrives, and its scans' points are freed once prepared (a moving
+/// sensor's sweep once matched), so a survey's raw points are never all held (docs/scaling.md). The
+/// same result as map_survey: the matcher's scan i depends only on scans 0..i (LiveMapper's
+/// guarantee). For the CPU backend: a device's failure (BackendError) is thrown, not matched again
+/// on the CPU (the points it would need are gone). Thread-safety: one thread at a time.
+class PartwiseMapper {
+ public:
+  PartwiseMapper(const MappingSettings& settings, ComputeBackend& backend, const ProgressCallback& progress = {},
+                 const StopRequested& stop_requested = {});
+  ~PartwiseMapper();
+  /// The next part (the survey has `total` scans). false: a stop was requested; add no more.
+  bool add(std::vector<Scan>& part, std::size_t total);
+  /// After the last part: loops and the rest of the relaxation (unless stopped); the result.
+  MappingResult finish();
+
+ private:
+  MappingSettings settings_;  // the matcher refers to it
+  std::unique_ptr<detail::SurveyMatcher> matcher_;
+  bool stopped_ = false;
+};
+
 /// The many-scan matcher fed scan by scan, as scans arrive (`minemap watch`). add() prepares a scan
 /// and matches it as map_survey matches the i-th scan (its mode's match, and for kSimultaneous the
 /// relaxation's per-scan budget); finish() does what map_survey does after the last scan (the rest of

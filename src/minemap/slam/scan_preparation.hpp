@@ -55,8 +55,9 @@ class ScanPreparation {
   TreeBuild model_trees_when() const;
   /// Every scan, in order (the voxel means in parallel, the trees in one prepare_many call each for
   /// data, models and probes); reports "filtering" after each scan is reduced.
-  /// `first`: the index of scans[0] in the survey (for the progress reports).
-  std::vector<PreparedScan> prepare_all(std::span<const Scan> scans, RunControl& control, std::size_t first = 0);
+  /// `first`: the index of scans[0] in the survey, for the progress reports (`report`).
+  std::vector<PreparedScan> prepare_all(std::span<const Scan> scans, RunControl& control, std::size_t first = 0,
+                                        bool report = true);
   /// True once a scan without slices skipped the slice filter it was asked for (a note).
   bool skipped_slice_filter() const { return skipped_slice_filter_; }
 

@@ -66,7 +66,7 @@ MappingResult SurveyMatcher::run(const std::vector<Scan>& scans, std::vector<Sca
   const std::size_t chunk = 4 * static_cast<std::size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
   for (std::size_t first = 0; first < scans.size(); first += chunk) {
     const std::span<const Scan> part(scans.data() + first, std::min(chunk, scans.size() - first));
-    std::vector<PreparedScan> prepared = preparation_.prepare_all(part, control_, first);
+    std::vector<PreparedScan> prepared = preparation_.prepare_all(part, control_, first, /*report=*/true);
     for (std::size_t k = 0; k < part.size(); ++k) {
       append(part[k], std::move(prepared[k]));
       if (release != nullptr) release_points((*release)[first + k]);
@@ -83,6 +83,40 @@ MappingResult SurveyMatcher::run(const std::vector<Scan>& scans, std::vector<Sca
   }
   finish();
   return result();
+}
+
+bool SurveyMatcher::add_part(std::vector<Scan>& part, std::size_t total) {
+  control_.expect(total);
+  const std::size_t first = state_.size();
+  const bool sweeps = std::any_of(part.begin(), part.end(), [&](const Scan& scan) {
+    return settings_.motion.deskew != DeskewMode::kOff && !scan.attributes.time_s.empty();
+  });
+  const auto stop_before = [&](std::size_t i) {
+    if (i == 0 || !control_.stop_requested()) return false;
+    interrupted_ = true;
+    scans_matched_ = i;
+    return true;
+  };
+  if (sweeps) {
+    for (std::size_t k = 0; k < part.size(); ++k) {
+      if (stop_before(first + k)) return false;
+      arrive(part[k]);
+      release_points(part[k]);
+    }
+    return true;
+  }
+  // The part's voxel means in parallel, as run's chunks (its progress is the matching's alone: the
+  // reduction and the matching take turns part by part).
+  std::vector<PreparedScan> prepared = preparation_.prepare_all(part, control_, first, /*report=*/false);
+  for (std::size_t k = 0; k < part.size(); ++k) {
+    append(part[k], std::move(prepared[k]));
+    release_points(part[k]);
+  }
+  for (std::size_t i = std::max<std::size_t>(first, 1); i < state_.size(); ++i) {
+    if (stop_before(i)) return false;
+    match_scan(i);
+  }
+  return true;
 }
 
 void SurveyMatcher::add(const Scan& scan) {

@@ -40,6 +40,10 @@ class SurveyMatcher {
   /// points and attributes are freed once it is prepared (a sweep's once it is matched); its name,
   /// source and pose stay. The result is the same either way.
   MappingResult run(const std::vector<Scan>& scans, std::vector<Scan>* release = nullptr);
+  /// PartwiseMapper::add: the next part of a survey (`total` scans in all), prepared (in parallel)
+  /// and matched, each scan's points freed once prepared (a sweep's once matched). false: a stop was
+  /// requested; the scans before it are final (result() says so), and no part should follow.
+  bool add_part(std::vector<Scan>& part, std::size_t total);
   /// LiveMapper::add: one more scan, prepared alone (the same clouds as run's), then matched.
   void add(const Scan& scan);
   /// LiveMapper::restore: one more scan prepared, its outcome as a previous run left it.
