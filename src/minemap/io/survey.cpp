@@ -15,8 +15,10 @@
 //    `initial_poses` is given; ply and kitti start from the identity.
 //  - One unit for the whole folder: ReadSettings::unit, else the format's default, applies to the
 //    points, the .pose files, truth and `initial_poses` alike; so does right_handed_to_3dtk.
-//  - Scans are read one after another, so the first bad file in name order is the one reported; the
-//    checks of the survey as a whole (too few points, duplicates, units) come after every file parsed.
+//  - Files are parsed in parallel, a part at a time (read_survey: one part of every file;
+//    read_survey_in_parts: `part_scans`), and the first bad file in name order is the one reported.
+//    Each part is checked alone (too few points, all points identical); what needs every scan
+//    (duplicates, units, truth/) comes after the last part, from per-scan summaries.
 //  - Units: with the unit left to uos' default (cm), a survey whose every scan (of >= 100 points)
 //    spans less than 1 m is refused (kSuspiciousUnits): that is a survey in metres read as cm, which
 //    the cm thresholds (25 cm pairs, 10 cm reduction) would silently fail to register. An explicit
@@ -299,7 +301,7 @@ struct ScanSummary {
   fs::path parsed;     ///< the file parsed, to read again (empty: a foreign survey's scan)
   std::size_t size = 0;
   double diagonal_cm = 0.0;
-  std::uint64_t hash = 0;  ///< of the points' bits and the local origin as read
+  std::uint64_t hash = 0;  ///< of the points' bits and the local origin (points_hash)
 };
 
 /// FNV-1a over the points' 32-bit words and the local origin: equal scans hash alike.
