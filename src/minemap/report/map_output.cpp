@@ -210,6 +210,12 @@ PersonView person_view(const MappingResult& result, const std::optional<std::vec
   const bool intensity = !result.scans.empty() && std::all_of(result.scans.begin(), result.scans.end(), [](const auto& s) {
     return s.used_intensity && s.used_points_cm && s.used_intensity->size() == s.used_points_cm->size();
   });
+  // Sized once: a long survey's map is millions of points, and growing by doubling held twice that.
+  std::size_t total = 0;
+  for (const ScanOutcome& scan : result.scans) total += scan.used_points_cm ? scan.used_points_cm->size() : 0;
+  view.points_cm.reserve(total);
+  view.point_scans.reserve(total);
+  if (intensity) view.intensity.reserve(total);
   for (std::size_t i = 0; i < result.scans.size(); ++i) {
     const ScanOutcome& scan = result.scans[i];
     view.trajectory_cm.push_back({static_cast<double>(i), turn_pose(scan.pose_cm)});
