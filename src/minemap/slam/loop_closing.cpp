@@ -164,8 +164,7 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
   std::vector<Pose> poses(n);
   for (std::size_t k = 0; k < n; ++k) poses[k] = state.pose(k);
   const std::vector<double> driven = driven_cm(state);  // as the chain left the scans
-  std::vector<PoseGraphEdge> edges = chain(state);
-  const std::size_t chain_edges = edges.size();
+  std::vector<PoseGraphEdge> loop_edges;  // the loops' edges; the chain's come first in the graph
   std::vector<LoopClosure> unclosed_returns;  // the first converged, untrusted candidate of each
   for (const std::vector<Candidate>& candidates : returns(state)) {
     std::optional<LoopClosure> unclosed;
@@ -183,9 +182,11 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
         const Pose moved = rigid_inverse(poses[loop.to]) * *matched;
         loop.gap_before_cm = translation_norm(moved);
         loop.gap_before_deg = rotation_angle_deg(moved);
-        edges.push_back({loop.from, loop.to, rigid_inverse(poses[loop.from]) * *matched, 1.0});
+        loop_edges.push_back({loop.from, loop.to, rigid_inverse(poses[loop.from]) * *matched, 1.0});
         // At the pose the loop match found, not where the chain left the scan.
-        if (geometric(state, loop.to)) edges.back().information = edge_information(state, loop.from, loop.to, *matched);
+        if (geometric(state, loop.to)) {
+          loop_edges.back().information = edge_information(state, loop.from, loop.to, *matched);
+        }
       }
       loops.push_back(loop);
       if (loop.closed) break;
@@ -194,10 +195,15 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
   }
   // After the relaxation (if any) and its judging: a return whose matches converged but none was
   // trusted leaves its drift in the map, and the run says so.
-  if (edges.size() == chain_edges) {
+  if (loop_edges.empty()) {
     for (const LoopClosure& loop : unclosed_returns) doubt_unclosed_return(state, loop);
     return loops;
   }
+  // The chain only now that a loop closed: its information pairs every scan with the one before
+  // (each model's kd-tree built for it), the state unchanged by the loop matches (they place nothing).
+  std::vector<PoseGraphEdge> edges = chain(state);
+  const std::size_t chain_edges = edges.size();
+  edges.insert(edges.end(), loop_edges.begin(), loop_edges.end());
   const PoseGraphResult relaxed = optimise_pose_graph(poses, edges, 0, settings_.loops.graph);
   for (std::size_t k = 1; k < n; ++k) state.place(k, relaxed.poses[k]);
   judge_again(state, control);
