@@ -85,8 +85,7 @@ void ProgressBar::operator()(std::size_t done, std::size_t total, const std::str
     phase_first_done_ = done;
   }
   if (!terminal_) {
-    // Scan 0 is the master: matching reports scans 2..n, the reduction only its end.
-    if (phase == "filtering" && done != total) return;
+    // Scan 0 is the master: matching reports scans 2..n.
     std::fprintf(stderr, "minemap: progress: %s %zu/%zu%s\n", phase.c_str(), done, total,
                  pace(done, total).c_str());  // not logged
     std::fflush(stderr);

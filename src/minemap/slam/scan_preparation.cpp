@@ -127,8 +127,7 @@ PreparedScan ScanPreparation::prepare(const Scan& scan, RunControl& control, con
   return prepared;
 }
 
-std::vector<PreparedScan> ScanPreparation::prepare_all(std::span<const Scan> scans, RunControl& control,
-                                                       std::size_t first, bool report) {
+std::vector<PreparedScan> ScanPreparation::prepare_all(std::span<const Scan> scans, RunControl& control) {
   const std::size_t n = scans.size();
   // Voxel means are a host computation (the same bits for every backend), one scan per task.
   std::vector<VoxelMeans> voxel(n);
@@ -147,7 +146,6 @@ std::vector<PreparedScan> ScanPreparation::prepare_all(std::span<const Scan> sca
     has_probe[i] = reduced.has_probe;
     if (reduced.has_model) models.push_back(std::move(reduced.model));
     if (reduced.has_probe) probes.push_back(std::move(reduced.probe));
-    if (report) control.report(first + i + 1, "filtering");
   }
   // Every tree at once (the CPU backend builds them in parallel); clouds in scan order.
   control.timed(&StageTimes::tree_build_s, [&] {

@@ -53,11 +53,9 @@ class ScanPreparation {
   SweepTiming timing_of(const Scan& scan) const;
   /// When the scans' model trees are built (a data or probe tree: on first use, always).
   TreeBuild model_trees_when() const;
-  /// Every scan, in order (the voxel means in parallel, the trees in one prepare_many call each for
-  /// data, models and probes); reports "filtering" after each scan is reduced.
-  /// `first`: the index of scans[0] in the survey, for the progress reports (`report`).
-  std::vector<PreparedScan> prepare_all(std::span<const Scan> scans, RunControl& control, std::size_t first = 0,
-                                        bool report = true);
+  /// Every scan of `scans` (a part of a survey), in order (the voxel means in parallel, the trees in
+  /// one prepare_many call each for data, models and probes). Its progress is the matching's.
+  std::vector<PreparedScan> prepare_all(std::span<const Scan> scans, RunControl& control);
   /// True once a scan without slices skipped the slice filter it was asked for (a note).
   bool skipped_slice_filter() const { return skipped_slice_filter_; }
 

@@ -43,43 +43,13 @@ void release_points(Scan& scan) {
 
 MappingResult SurveyMatcher::run(const std::vector<Scan>& scans, std::vector<Scan>* release) {
   control_.expect(scans.size());
-  const bool sweeps = std::any_of(scans.begin(), scans.end(), [&](const Scan& scan) {
-    return settings_.motion.deskew != DeskewMode::kOff && !scan.attributes.time_s.empty();
-  });
-  if (sweeps) {
-    // A moving sensor's sweeps: each is deskewed by the motion before it, so each is prepared as it
-    // arrives, as `add` does.
-    for (std::size_t i = 0; i < scans.size(); ++i) {
-      if (i > 0 && control_.stop_requested()) {
-        interrupted_ = true;
-        scans_matched_ = i;
-        return result();
-      }
-      arrive(scans[i]);
-      if (release != nullptr) release_points((*release)[i]);
-    }
-    finish();
-    return result();
-  }
-  // A chunk at a time, so that a survey's reduced clouds and its raw points are not all held at
-  // once (its voxel means in parallel within the chunk; the same clouds as all at once).
+  // A chunk at a time, as add_part takes a survey's parts: its reduced clouds and its raw points
+  // are not all held at once (the voxel means in parallel within the chunk; the same result).
   const std::size_t chunk = 4 * static_cast<std::size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
   for (std::size_t first = 0; first < scans.size(); first += chunk) {
-    const std::span<const Scan> part(scans.data() + first, std::min(chunk, scans.size() - first));
-    std::vector<PreparedScan> prepared = preparation_.prepare_all(part, control_, first, /*report=*/true);
-    for (std::size_t k = 0; k < part.size(); ++k) {
-      append(part[k], std::move(prepared[k]));
-      if (release != nullptr) release_points((*release)[first + k]);
-    }
-  }
-  for (std::size_t i = 1; i < scans.size(); ++i) {
-    if (control_.stop_requested()) {
-      // Scans 0..i-1 are final (a relaxation cut short leaves them where its last match put them).
-      interrupted_ = true;
-      scans_matched_ = i;
-      return result();
-    }
-    match_scan(i);
+    const std::size_t count = std::min(chunk, scans.size() - first);
+    const std::span<Scan> owned = release != nullptr ? std::span<Scan>(release->data() + first, count) : std::span<Scan>{};
+    if (!take_part({scans.data() + first, count}, owned)) return result();
   }
   finish();
   return result();
@@ -87,30 +57,40 @@ MappingResult SurveyMatcher::run(const std::vector<Scan>& scans, std::vector<Sca
 
 bool SurveyMatcher::add_part(std::vector<Scan>& part, std::size_t total) {
   control_.expect(total);
+  return take_part(part, part);
+}
+
+bool SurveyMatcher::take_part(std::span<const Scan> part, std::span<Scan> owned) {
   const std::size_t first = state_.size();
-  const bool sweeps = std::any_of(part.begin(), part.end(), [&](const Scan& scan) {
-    return settings_.motion.deskew != DeskewMode::kOff && !scan.attributes.time_s.empty();
-  });
+  const auto release = [&](std::size_t k) {
+    if (!owned.empty()) release_points(owned[k]);
+  };
   const auto stop_before = [&](std::size_t i) {
+    // Scans 0..i-1 are final (a relaxation cut short leaves them where its last match put them).
     if (i == 0 || !control_.stop_requested()) return false;
     interrupted_ = true;
     scans_matched_ = i;
     return true;
   };
+  const bool sweeps = std::any_of(part.begin(), part.end(), [&](const Scan& scan) {
+    return settings_.motion.deskew != DeskewMode::kOff && !scan.attributes.time_s.empty();
+  });
   if (sweeps) {
+    // A moving sensor's sweeps: each is deskewed by the motion before it, so each is prepared as it
+    // arrives, as `add` does.
     for (std::size_t k = 0; k < part.size(); ++k) {
       if (stop_before(first + k)) return false;
       arrive(part[k]);
-      release_points(part[k]);
+      release(k);
     }
     return true;
   }
-  // The part's voxel means in parallel, as run's chunks (its progress is the matching's alone: the
-  // reduction and the matching take turns part by part).
-  std::vector<PreparedScan> prepared = preparation_.prepare_all(part, control_, first, /*report=*/false);
+  // The part's voxel means in parallel; its progress is the matching's alone (the reduction and the
+  // matching take turns part by part).
+  std::vector<PreparedScan> prepared = preparation_.prepare_all(part, control_);
   for (std::size_t k = 0; k < part.size(); ++k) {
     append(part[k], std::move(prepared[k]));
-    release_points(part[k]);
+    release(k);
   }
   for (std::size_t i = std::max<std::size_t>(first, 1); i < state_.size(); ++i) {
     if (stop_before(i)) return false;

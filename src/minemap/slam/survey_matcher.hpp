@@ -14,6 +14,7 @@
 // on a CPU backend); nothing here is reset by hand.
 #include <optional>
 #include <string>
+#include <span>
 #include <utility>
 #include <vector>
 
@@ -66,6 +67,9 @@ class SurveyMatcher {
   /// One scan arrives (run's sweeps, and add): prepared (a sweep deskewed by the motion predicted
   /// for it) and matched.
   void arrive(const Scan& scan);
+  /// run's chunks and add_part's parts: prepared and matched in order (a sweep as it arrives);
+  /// `owned` (the same scans, or empty) has each scan's points freed once they are used. false: stopped.
+  bool take_part(std::span<const Scan> part, std::span<Scan> owned);
   /// Scan i, arrived: the mode's match from where the motion model predicts it (a sweep's deskew
   /// refined by its registered step), and for kSimultaneous the relaxation after it (steps 2 and 3,
   /// within the per-scan budget). `raw`: the sweep itself, to deskew again.
