@@ -285,8 +285,8 @@ TEST(MappingSimulatedMine, LettingThePointsGoGivesTheSameMapAndFreesThem) {
 
 /// PartwiseMapper fed `scans` in parts of `part_scans`, as the CLI feeds it what it reads.
 MappingResult map_in_parts(const std::vector<Scan>& scans, std::size_t part_scans, const MappingSettings& settings,
-                           ComputeBackend& backend, const StopRequested& stop = {}) {
-  PartwiseMapper mapper(settings, backend, {}, stop);
+                           ComputeBackend& backend, const StopRequested& stop = {}, const MemoryBound& bound = {}) {
+  PartwiseMapper mapper(settings, backend, {}, stop, bound);
   for (std::size_t first = 0; first < scans.size(); first += part_scans) {
     std::vector<Scan> part(scans.begin() + static_cast<std::ptrdiff_t>(first),
                            scans.begin() + static_cast<std::ptrdiff_t>(std::min(scans.size(), first + part_scans)));
@@ -322,6 +322,54 @@ TEST(MappingSimulatedMine, ASurveyMappedPartByPartIsTheSurveyMappedAtOnce) {
   for (std::size_t i = 0; i < stopped.scans_matched; ++i) {
     EXPECT_TRUE(stopped.scans[i].pose_cm == whole.scans[i].pose_cm) << "scan " << i;
   }
+}
+
+// A memory bound (the CLI's --held-clouds-mb) lets the clouds of the scans used least recently go
+// to a spill file and reads them back when a metascan, a loop or the map needs them: on a loop
+// survey, stop-and-go and sweeps, with a bound that holds almost nothing, the same poses, loops,
+// health and map points as with all held; the scans let go of keep no points in memory, and the
+// spill leaves no file behind. A bound on another backend than the CPU is refused, as one without
+// a folder.
+TEST(MappingSimulatedMine, AMemoryBoundGivesTheSameMapAndLetsTheCloudsGo) {
+  CpuBackend cpu;
+  const MappingSettings settings;
+  const test::TempDir folder;
+  const MemoryBound tight{.held_clouds_mb = 1, .spill_folder = folder.path()};
+  sim::SimulationSettings loop_settings;
+  loop_settings.mine.seed = 1;
+  loop_settings.mine.loop_length_cm = 12000.0;
+  const auto loop = sim::simulate_mine_survey(loop_settings);
+  const MappingResult held = map_survey(loop.scans, settings, cpu);
+  const MappingResult bounded = map_in_parts(loop.scans, 4, settings, cpu, {}, tight);
+  expect_same_result(held, bounded);
+  ASSERT_EQ(held.loops.size(), bounded.loops.size());
+  ASSERT_FALSE(held.loops.empty());
+  for (std::size_t k = 0; k < held.loops.size(); ++k) {
+    EXPECT_EQ(held.loops[k].closed, bounded.loops[k].closed);
+    EXPECT_EQ(held.loops[k].gap_before_cm, bounded.loops[k].gap_before_cm);
+    EXPECT_EQ(held.loops[k].gap_after_cm, bounded.loops[k].gap_after_cm);
+  }
+  ASSERT_TRUE(bounded.spilled);
+  std::size_t let_go = 0;
+  for (std::size_t i = 0; i < held.scans.size(); ++i) {
+    EXPECT_EQ(held.scans[i].health.after_loop_closure, bounded.scans[i].health.after_loop_closure) << "scan " << i;
+    let_go += bounded.scans[i].used_points_cm ? 0 : 1;
+    const MapPoints points = bounded.map_points(i);
+    ASSERT_TRUE(points.points_cm) << "scan " << i;
+    EXPECT_EQ(*points.points_cm, *held.scans[i].used_points_cm) << "scan " << i;
+  }
+  EXPECT_GE(let_go, held.scans.size() / 2);
+  EXPECT_TRUE(std::filesystem::is_empty(folder.path()));  // the spill file was unlinked at once
+
+  sim::MovingSimulationSettings moving;
+  moving.sensor = sim::MovingSensor::kSpinning;
+  moving.sweeps = 8;
+  const sim::MovingSurvey sweeps = sim::simulate_moving_survey(moving);
+  expect_same_result(map_survey(sweeps.scans, settings, cpu), map_in_parts(sweeps.scans, 3, settings, cpu, {}, tight));
+
+  auto opencl = test::opencl_backend();
+  EXPECT_THROW(PartwiseMapper(settings, *opencl, {}, {}, tight), std::invalid_argument);
+  EXPECT_THROW(PartwiseMapper(settings, cpu, {}, {}, MemoryBound{.held_clouds_mb = 1}), std::invalid_argument);
 }
 
 class MappingBackendsAgree : public ::testing::TestWithParam<const char*> {};

@@ -123,7 +123,7 @@ TEST(CommandLine, EveryMappingOptionChangesTheSettings) {
   // Each option outside the input and run groups is bound to a field of MappingSettings: changed,
   // it changes the settings map_survey is handed (or, for a choice, names another value).
   const MappingSettings defaults;
-  const std::set<std::string> not_mapping = {"--threads", "--opencl-device", "--backend", "--quiet",
+  const std::set<std::string> not_mapping = {"--threads", "--held-clouds-mb", "--opencl-device", "--backend", "--quiet",
                                              "--accept-doubtful", "--write-unregistered", "--unit",
                                              "--points-per-slice", "--no-slice-detection", "--initial-poses",
                                              "--reference-poses", "--right-handed-to-3dtk", "--preset"};

@@ -23,6 +23,7 @@
 #include "minemap/backend/make_backend.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/report/map_output.hpp"
+#include "minemap/slam/map_survey.hpp"
 #include "minemap/report/survey_export.hpp"
 #include "minemap/slam/survey_matching.hpp"
 
@@ -60,6 +61,8 @@ struct MapOptions {
   bool no_recovery = false;
   bool no_loops = false;
   int threads = 0;            ///< worker threads (0: all cores)
+  /// The prepared clouds a long survey holds at most on the CPU (MemoryBound), MB; 0: all.
+  std::size_t held_clouds_mb = MemoryBound::kSuggestedHeldCloudsMb;
   std::string opencl_device;  ///< a substring of "platform / device" (empty: MINEMAP_OPENCL_DEVICE)
 };
 

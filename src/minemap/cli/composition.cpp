@@ -119,7 +119,8 @@ MapRun map_in_parts(const MapCommand& command, BackendChoice backend, const Prog
   double read_s = 0.0;
   std::size_t survey_scans = 0;  // the folder's, however many were read before a stop
   with_threads(options, [&] {
-    PartwiseMapper mapper(command.settings, *run.backend.backend, progress, stop_requested);
+    PartwiseMapper mapper(command.settings, *run.backend.backend, progress, stop_requested,
+                          MemoryBound{.held_clouds_mb = options.held_clouds_mb, .spill_folder = options.out});
     auto reading = Clock::now();
     // A part of 4 scans a thread: the files are parsed in parallel, and matched as the next is read.
     const std::size_t part_scans = 4 * static_cast<std::size_t>(thread_count(options));

@@ -115,6 +115,9 @@ MapOptionTable::MapOptionTable(CLI::App& app, MapCommand& target) : app_(app) {
 void MapOptionTable::declare_run(MapOptions& map) {
   const char* g = groups::kRun;
   number(g, "--threads", map.threads, "Worker threads (0 = all cores)");
+  number(g, "--held-clouds-mb", map.held_clouds_mb,
+         "CPU: the prepared clouds held in memory at most (MB); the scans used least recently go to a spill file "
+         "in the output folder and are read back when needed (0 = hold all)");
   text(g, "--opencl-device", map.opencl_device,
        "OpenCL device: a substring of 'platform / device' (same as MINEMAP_OPENCL_DEVICE)");
   choice(g, "--backend", map.backend, kBackendNames, parse_backend, "Where the search runs");

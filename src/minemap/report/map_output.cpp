@@ -187,46 +187,65 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
 
 namespace {
 
-/// The map as the person-facing outputs show it: metres, right-handed, z up (MapOutputSettings).
+/// The map as the person-facing pictures show it: metres, right-handed, z up (MapOutputSettings).
 /// Points and positions stay in cm here (the views and map.html take cm); only the frame turns.
+/// The points are a sample when the map has more than MapOutputSettings::picture_points_max.
 struct PersonView {
-  std::vector<Eigen::Vector3f> points_cm;        ///< every scan's used points, placed
+  std::vector<Eigen::Vector3f> points_cm;        ///< every scan's used points (or every k-th), placed
   std::vector<float> intensity;                  ///< one per point when every scan has them, else empty
   std::vector<std::uint32_t> point_scans;        ///< each point's scan
   std::vector<Eigen::Vector3d> positions_cm, reference_positions_cm;
   std::vector<io::TimedPose> trajectory_cm;      ///< T_world_scan in the person frame (cm)
   std::vector<report::MapHtmlScan> html_scans;
+  bool every_scan_has_intensity = true;          ///< (so map.ply carries it)
 };
 
+Pose person_pose(const Pose& pose_cm, bool from_3dtk) {
+  return from_3dtk ? threedtk_pose_to_right_handed(pose_cm, 1.0) : pose_cm;
+}
+
+/// Scan i's map points placed in the person frame, every `stride`-th (cm, float: as map.ply stores them).
+void place_points(const MappingResult& result, std::size_t i, bool from_3dtk, std::size_t stride,
+                  std::vector<Eigen::Vector3f>& placed, const MapPoints& points) {
+  const Pose pose = person_pose(result.scans[i].world_from_points, from_3dtk);
+  const Eigen::Matrix3d r = pose.block<3, 3>(0, 0);
+  const Eigen::Vector3d t = pose.block<3, 1>(0, 3);
+  if (!points.points_cm) return;
+  const std::vector<Eigen::Vector3f>& local = *points.points_cm;
+  for (std::size_t k = 0; k < local.size(); k += stride) placed.push_back((r * local[k].cast<double>() + t).cast<float>());
+}
+
+bool has_intensity(const MapPoints& points) {
+  return points.intensity && points.points_cm && points.intensity->size() == points.points_cm->size();
+}
+
 PersonView person_view(const MappingResult& result, const std::optional<std::vector<Pose>>& truth_cm,
-                       bool from_3dtk) {
+                       bool from_3dtk, std::size_t picture_points_max) {
   const auto turn = [from_3dtk](const Eigen::Vector3d& p_cm) {
     return from_3dtk ? threedtk_to_right_handed(p_cm, 1.0) : p_cm;
   };
-  const auto turn_pose = [from_3dtk](const Pose& pose_cm) {
-    return from_3dtk ? threedtk_pose_to_right_handed(pose_cm, 1.0) : pose_cm;
-  };
   PersonView view;
-  const bool intensity = !result.scans.empty() && std::all_of(result.scans.begin(), result.scans.end(), [](const auto& s) {
-    return s.used_intensity && s.used_points_cm && s.used_intensity->size() == s.used_points_cm->size();
-  });
-  // Sized once: a long survey's map is millions of points, and growing by doubling held twice that.
   std::size_t total = 0;
-  for (const ScanOutcome& scan : result.scans) total += scan.used_points_cm ? scan.used_points_cm->size() : 0;
-  view.points_cm.reserve(total);
-  view.point_scans.reserve(total);
-  if (intensity) view.intensity.reserve(total);
+  for (const ScanOutcome& scan : result.scans) total += scan.points_used;
+  // Every k-th point of each scan above the bound; sized once (a long survey's map is millions of
+  // points, and growing by doubling held twice that).
+  const std::size_t stride = picture_points_max > 0 && total > picture_points_max
+                                 ? (total + picture_points_max - 1) / picture_points_max
+                                 : 1;
+  view.points_cm.reserve(total / stride + result.scans.size());
+  view.point_scans.reserve(total / stride + result.scans.size());
+  view.every_scan_has_intensity = !result.scans.empty();
   for (std::size_t i = 0; i < result.scans.size(); ++i) {
     const ScanOutcome& scan = result.scans[i];
-    view.trajectory_cm.push_back({static_cast<double>(i), turn_pose(scan.pose_cm)});
+    view.trajectory_cm.push_back({static_cast<double>(i), person_pose(scan.pose_cm, from_3dtk)});
     view.positions_cm.push_back(turn(scan.pose_cm.block<3, 1>(0, 3)));
-    const Pose placed = turn_pose(scan.world_from_points);
-    const Eigen::Matrix3d r = placed.block<3, 3>(0, 0);
-    const Eigen::Vector3d t = placed.block<3, 1>(0, 3);
-    if (scan.used_points_cm) {
-      for (const auto& p : *scan.used_points_cm) view.points_cm.push_back((r * p.cast<double>() + t).cast<float>());
+    const MapPoints points = result.map_points(i);  // one scan at a time (read back where spilled)
+    place_points(result, i, from_3dtk, stride, view.points_cm, points);
+    if (view.every_scan_has_intensity && has_intensity(points)) {
+      for (std::size_t k = 0; k < points.intensity->size(); k += stride) view.intensity.push_back((*points.intensity)[k]);
+    } else {
+      view.every_scan_has_intensity = false;
     }
-    if (intensity) view.intensity.insert(view.intensity.end(), scan.used_intensity->begin(), scan.used_intensity->end());
     view.point_scans.resize(view.points_cm.size(), static_cast<std::uint32_t>(i));
     // map.html's info box: why a registered scan's match is doubtful, or why an unregistered one
     // failed; for a trusted one that needed a retry, from how wide.
@@ -256,6 +275,7 @@ PersonView person_view(const MappingResult& result, const std::optional<std::vec
                                                                  : "",
                                .note = note});
   }
+  if (!view.every_scan_has_intensity) std::vector<float>().swap(view.intensity);
   if (truth_cm && truth_cm->size() == result.scans.size()) {
     // Reference trajectory expressed in the master scan's frame, as the registered one is.
     const Pose align = result.scans.front().pose_cm * rigid_inverse(truth_cm->front());
@@ -265,10 +285,12 @@ PersonView person_view(const MappingResult& result, const std::optional<std::vec
 }
 
 /// map.ply: the registered points the matching used, in metres, right-handed, z up, with each
-/// point's scan and (where every scan has one) its intensity.
-void write_map_ply(const std::filesystem::path& path, const PersonView& view, const MapOutputSettings& output) {
+/// point's scan and (where every scan has one) its intensity. Scan by scan, read back where spilled:
+/// never the whole map in memory.
+void write_map_ply(const std::filesystem::path& path, const MappingResult& result, bool with_intensity,
+                   const MapOutputSettings& output) {
   io::PlyStreamWriter::Layout layout;
-  layout.attributes = view.intensity.empty() ? 0 : kIntensity;
+  layout.attributes = with_intensity ? kIntensity : 0;
   layout.scan_index = true;
   layout.comments = {"minemap map: the registered points the matching used (voxel means or filtered slices)",
                      "frame: metres, right-handed, z up" + std::string(output.survey_in_3dtk_frame
@@ -281,18 +303,18 @@ void write_map_ply(const std::filesystem::path& path, const PersonView& view, co
                               " m (report.json) for its own coordinates");
   }
   io::PlyStreamWriter ply(path, layout);
+  std::vector<Eigen::Vector3f> placed;
   std::vector<Eigen::Vector3d> points;
   PointAttributes attributes;
-  std::size_t begin = 0;
-  while (begin < view.points_cm.size()) {  // one batch per scan
-    const std::uint32_t scan = view.point_scans[begin];
-    std::size_t end = begin;
-    while (end < view.points_cm.size() && view.point_scans[end] == scan) ++end;
+  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+    const MapPoints scan_points = result.map_points(i);
+    placed.clear();
+    place_points(result, i, output.survey_in_3dtk_frame, 1, placed, scan_points);
+    if (placed.empty()) continue;
     points.clear();
-    for (std::size_t k = begin; k < end; ++k) points.push_back(view.points_cm[k].cast<double>() / 100.0);
-    if (!view.intensity.empty()) attributes.intensity.assign(view.intensity.begin() + begin, view.intensity.begin() + end);
-    ply.write(points, attributes, scan);
-    begin = end;
+    for (const Eigen::Vector3f& p : placed) points.push_back(p.cast<double>() / 100.0);
+    if (with_intensity) attributes.intensity = *scan_points.intensity;
+    ply.write(points, attributes, static_cast<std::uint32_t>(i));
   }
   ply.finish();
 }
@@ -344,7 +366,7 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
     io::write_uos_pose(out_dir / (scan.name + ".pose"), scan.pose_cm, output.unit);
   });
   // What a person opens: metres, right-handed, z up.
-  const PersonView view = person_view(result, truth_cm, output.survey_in_3dtk_frame);
+  const PersonView view = person_view(result, truth_cm, output.survey_in_3dtk_frame, output.picture_points_max);
   report::MapViewSettings views;
   views.up_axis = 2;
   views.title = output.title;
@@ -356,7 +378,7 @@ std::string write_map_outputs(const std::filesystem::path& out_dir, const Mappin
   tbb::parallel_invoke(
       [&] {
         io::write_tum(out_dir / "trajectory.tum", view.trajectory_cm, LengthUnit::kMetre);
-        write_map_ply(out_dir / "map.ply", view, output);
+        write_map_ply(out_dir / "map.ply", result, view.every_scan_has_intensity, output);
       },
       [&] { report::write_top_view_png(out_dir / "top.png", input, views); },
       [&] { report::write_side_view_png(out_dir / "side.png", input, views); },

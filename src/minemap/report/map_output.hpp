@@ -50,6 +50,10 @@ struct MapOutputSettings {
   std::string version;                    ///< minemap's version (report.json "version")
   std::vector<std::string> command_line;  ///< the run's arguments, program first (report.json)
   std::vector<RecordedSetting> settings;  ///< every option (report.json "settings", "run_options"; empty: none)
+  /// The pictures (top.png, side.png, map.html) draw at most this many points: every k-th point of
+  /// each scan above it (map.ply always holds every point). 16 million points (about 1 400 simulated
+  /// scans) are drawn whole; a longer survey's pictures would otherwise hold it all in memory.
+  std::size_t picture_points_max = 16'000'000;
 };
 
 /// Pose errors before (odometry) and after registration, when the survey has reference poses.

@@ -61,6 +61,9 @@ class PreparedCloud {
  public:
   virtual ~PreparedCloud() = default;
   std::span<const Eigen::Vector3f> points() const { return points_; }
+  /// The same points as a vector: a scan's points for the map share them (an aliasing shared_ptr
+  /// to this cloud) instead of holding a copy.
+  const std::vector<Eigen::Vector3f>& point_vector() const { return points_; }
   /// The kd-tree over points(); built here on the first call when prepared with kOnFirstUse.
   const KdTree& tree() const {
     std::call_once(built_, [this] { tree_ = KdTree(points_, tree_settings_); });

@@ -22,13 +22,14 @@ bool LoopClosing::geometric(const SurveyState& state, std::size_t k) const {
   return settings_.loops.information_from_geometry && state.prepared(k).planes.has_value();
 }
 
-std::vector<PoseGraphEdge> LoopClosing::chain(const SurveyState& state) const {
+std::vector<PoseGraphEdge> LoopClosing::chain(SurveyState& state) const {
   std::vector<PoseGraphEdge> edges;
   for (std::size_t k = 1; k < state.size(); ++k) {
     // A scan left at odometry constrains its neighbours only weakly.
     const bool matched = state.registered(k) && state.registered(k - 1);
     edges.push_back({k - 1, k, rigid_inverse(state.pose(k - 1)) * state.pose(k), matched ? 1.0 : 0.01});
     if (matched && geometric(state, k)) edges.back().information = edge_information(state, k - 1, k, state.pose(k));
+    state.release_over_budget();  // a long survey's memory bound (each scan read back once here)
   }
   return edges;
 }
@@ -154,6 +155,7 @@ void LoopClosing::judge_again(SurveyState& state, const RunControl& control) con
     health.retry_bound_cm = old.retry_bound_cm;
     health.after_loop_closure = true;
     state.judged(k, std::move(health));
+    state.release_over_budget();
   }
 }
 
@@ -189,6 +191,7 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
         }
       }
       loops.push_back(loop);
+      state.release_over_budget();
       if (loop.closed) break;
     }
     if (unclosed && !loops.back().closed) unclosed_returns.push_back(*unclosed);

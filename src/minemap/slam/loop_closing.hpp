@@ -52,7 +52,7 @@ class LoopClosing {
   /// map's drift over the loop stays, unmeasured; the return's scan is judged doubtful.
   void doubt_unclosed_return(SurveyState& state, const LoopClosure& loop) const;
   /// The chain of scan-to-scan steps as the scans stand (step 3's first edges).
-  std::vector<PoseGraphEdge> chain(const SurveyState& state) const;
+  std::vector<PoseGraphEdge> chain(SurveyState& state) const;
   /// The information of the edge `from` -> `to` (`to` at `to_pose`), from the geometry of their pairs.
   Matrix6d edge_information(const SurveyState& state, std::size_t from, std::size_t to, const Pose& to_pose) const;
   /// Whether edge information comes from geometry for an edge ending at scan k (its planes exist).

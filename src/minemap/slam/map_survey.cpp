@@ -36,10 +36,18 @@ MappingResult map_survey_releasing_points(std::vector<Scan>& scans, const Mappin
 }
 
 PartwiseMapper::PartwiseMapper(const MappingSettings& settings, ComputeBackend& backend,
-                               const ProgressCallback& progress, const StopRequested& stop_requested)
+                               const ProgressCallback& progress, const StopRequested& stop_requested,
+                               const MemoryBound& bound)
     : settings_(settings) {
   settings_.validate();
   matcher_ = std::make_unique<detail::SurveyMatcher>(settings_, backend, detail::RunControl{progress, stop_requested});
+  if (bound.held_clouds_mb == 0) return;
+  if (backend.name() != "cpu") {
+    throw std::invalid_argument("a memory bound holds the CPU backend's clouds; the " + backend.name() +
+                                " backend keeps its own on the device");
+  }
+  if (bound.spill_folder.empty()) throw std::invalid_argument("a memory bound needs a folder for its spill file");
+  matcher_->bound_memory(bound.spill_folder, bound.held_clouds_mb * 1024 * 1024);
 }
 PartwiseMapper::~PartwiseMapper() = default;
 

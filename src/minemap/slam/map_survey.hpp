@@ -13,6 +13,7 @@
 //
 // The search, the sums and the slice filter run in the compute backend the caller hands in
 // (backend/compute_backend.hpp); the voxel reduction, Horn's method and the schedule on the host.
+#include <filesystem>
 #include <memory>
 #include <vector>
 
@@ -45,6 +46,20 @@ namespace detail {
 class SurveyMatcher;
 }
 
+/// What a PartwiseMapper holds of a long survey (docs/scaling.md): the prepared clouds of the scans
+/// used least recently are written to a spill file and read back when a scan is needed again (a
+/// metascan near a return, a loop, the map's points), so memory follows the bound, not the survey.
+/// The result is the same with any bound.
+struct MemoryBound {
+  /// What `minemap map` holds: 1 200 simulated scans' clouds (about 0.4 MB each), so the surveys of
+  /// up to a thousand scans are never spilled, and a 10 000-scan one stays near 1 GB (docs/scaling.md).
+  static constexpr std::size_t kSuggestedHeldCloudsMb = 512;
+  /// Prepared clouds held at most (estimated: points, their kd-trees, planes), MB; 0: all held.
+  std::size_t held_clouds_mb = 0;
+  /// The folder the spill file is made in (unlinked at once: nothing stays there); the output folder.
+  std::filesystem::path spill_folder;
+};
+
 /// map_survey fed a part at a time, as io::read_survey_in_parts reads a survey: each part is
 /// prepared and matched as it arrives, and its scans' points are freed once prepared (a moving
 /// sensor's sweep once matched), so a survey's raw points are never all held (docs/scaling.md). The
@@ -53,8 +68,10 @@ class SurveyMatcher;
 /// on the CPU (the points it would need are gone). Thread-safety: one thread at a time.
 class PartwiseMapper {
  public:
+  /// Throws std::invalid_argument for a memory bound on a backend other than the CPU (a device's
+  /// clouds live on it), or without a spill folder.
   PartwiseMapper(const MappingSettings& settings, ComputeBackend& backend, const ProgressCallback& progress = {},
-                 const StopRequested& stop_requested = {});
+                 const StopRequested& stop_requested = {}, const MemoryBound& bound = {});
   ~PartwiseMapper();
   /// The next part (the survey has `total` scans). false: a stop was requested; add no more.
   bool add(std::vector<Scan>& part, std::size_t total);

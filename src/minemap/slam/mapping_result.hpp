@@ -63,8 +63,25 @@ struct LoopClosure {
   double misclosure_fraction() const { return path_cm > 0.0 ? gap_before_cm / path_cm : 0.0; }
 };
 
+/// A scan's points for the map (ScanOutcome::used_points_cm and used_intensity).
+struct MapPoints {
+  std::shared_ptr<const std::vector<Eigen::Vector3f>> points_cm;
+  std::shared_ptr<const std::vector<float>> intensity;
+};
+
+/// Where a long run keeps the map points of the scans it let go of from memory (docs/scaling.md):
+/// read back one scan at a time by whoever writes the map. Thread-safety: points_of from any thread.
+class SpilledPoints {
+ public:
+  virtual ~SpilledPoints() = default;
+  virtual MapPoints points_of(std::size_t scan) const = 0;
+};
+
 struct MappingResult {
   std::vector<ScanOutcome> scans;
+  /// Where the scans whose used_points_cm are null keep them (a run with a memory bound); null: all
+  /// in memory. Read them through map_points().
+  std::shared_ptr<const SpilledPoints> spilled;
   std::string backend;       ///< the backend that made the poses: "cpu: ..." / "opencl: <device>"
   std::string backend_note;  ///< empty, or why another backend than the one handed in made them
   std::vector<std::string> notes;  ///< fallbacks, skipped filters
@@ -78,6 +95,8 @@ struct MappingResult {
   bool interrupted = false;
   std::size_t scans_matched = 0;
   bool all_registered() const;
+  /// Scan i's map points, from memory or read back from `spilled`; null points where it has none.
+  MapPoints map_points(std::size_t i) const;
   /// Indices of the registered scans whose last match was judged doubtful (ScanOutcome::health).
   std::vector<std::size_t> doubtful() const;
 };

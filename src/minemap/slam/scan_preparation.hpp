@@ -41,6 +41,10 @@ struct PreparedScan {
   const SurfaceNormals* planes_or_null() const { return planes ? &*planes : nullptr; }
 };
 
+/// Sets used_points_cm to the data cloud's own points (prepared.cloud must be set): an aliasing
+/// pointer, so the map's points keep the cloud alive and are its points, not a copy of them.
+void share_with_the_map(PreparedScan& prepared);
+
 class ScanPreparation {
  public:
   ScanPreparation(const MappingSettings& settings, ComputeBackend& backend) : settings_(settings), backend_(backend) {}

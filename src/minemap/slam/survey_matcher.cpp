@@ -55,6 +55,10 @@ MappingResult SurveyMatcher::run(const std::vector<Scan>& scans, std::vector<Sca
   return result();
 }
 
+void SurveyMatcher::bound_memory(const std::filesystem::path& spill_folder, std::size_t held_bytes) {
+  state_.bound_memory(std::make_shared<ScanSpill>(spill_folder, settings_, backend_), held_bytes);
+}
+
 bool SurveyMatcher::add_part(std::vector<Scan>& part, std::size_t total) {
   control_.expect(total);
   return take_part(part, part);
@@ -82,6 +86,7 @@ bool SurveyMatcher::take_part(std::span<const Scan> part, std::span<Scan> owned)
       if (stop_before(first + k)) return false;
       arrive(part[k]);
       release(k);
+      state_.release_over_budget();
     }
     return true;
   }
@@ -95,6 +100,7 @@ bool SurveyMatcher::take_part(std::span<const Scan> part, std::span<Scan> owned)
   for (std::size_t i = std::max<std::size_t>(first, 1); i < state_.size(); ++i) {
     if (stop_before(i)) return false;
     match_scan(i);
+    state_.release_over_budget();
   }
   return true;
 }
@@ -437,6 +443,7 @@ void SurveyMatcher::finish() {
 MappingResult SurveyMatcher::result() const {
   MappingResult result;
   result.scans = state_.outcomes();
+  result.spilled = state_.spilled();
   result.backend = backend_name_;
   result.notes = notes_;
   result.times = control_.times();

@@ -12,6 +12,7 @@
 //
 // Thread-safety: one thread at a time. A BackendError propagates (map_survey starts a fresh matcher
 // on a CPU backend); nothing here is reset by hand.
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <span>
@@ -45,6 +46,9 @@ class SurveyMatcher {
   /// and matched, each scan's points freed once prepared (a sweep's once matched). false: a stop was
   /// requested; the scans before it are final (result() says so), and no part should follow.
   bool add_part(std::vector<Scan>& part, std::size_t total);
+  /// Before the first scan: hold at most `held_bytes` of prepared clouds, the rest in a spill file
+  /// in `spill_folder` (SurveyState::bound_memory; the CPU backend only). The same result.
+  void bound_memory(const std::filesystem::path& spill_folder, std::size_t held_bytes);
   /// LiveMapper::add: one more scan, prepared alone (the same clouds as run's), then matched.
   void add(const Scan& scan);
   /// LiveMapper::restore: one more scan prepared, its outcome as a previous run left it.

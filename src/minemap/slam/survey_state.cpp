@@ -22,7 +22,85 @@ std::size_t SurveyState::add(const Scan& scan, PreparedScan prepared) {
   return i;
 }
 
+namespace {
+
+/// A prepared scan's size in memory, estimated: its clouds' points and their kd-trees (about 8 bytes
+/// a point, built or not), the map's intensities, the planes' hash map (about 48 bytes a plane).
+std::size_t estimated_bytes(const PreparedScan& scan) {
+  std::size_t points = scan.cloud ? scan.cloud->points().size() : 0;
+  if (scan.model_cloud && scan.model_cloud != scan.cloud) points += scan.model_cloud->points().size();
+  if (scan.probe && scan.probe != scan.cloud) points += scan.probe->points().size();
+  const std::size_t intensity = scan.used_intensity ? scan.used_intensity->size() : 0;
+  const std::size_t planes = scan.planes ? scan.planes->planes() : 0;
+  return points * (sizeof(Eigen::Vector3f) + 8) + intensity * sizeof(float) + planes * 48;
+}
+
+}  // namespace
+
+void SurveyState::bound_memory(std::shared_ptr<ScanSpill> spill, std::size_t held_bytes) {
+  spill_ = std::move(spill);
+  budget_bytes_ = held_bytes;
+}
+
+const PreparedScan& SurveyState::prepared(std::size_t i) const {
+  const ScanState& state = scans_[i];
+  if (!spill_) return state.prepared;
+  const std::lock_guard lock(spill_mutex_);
+  if (state.let_go) {
+    state.prepared = spill_->load(i, state.prepared);
+    state.let_go = false;
+    held_bytes_ += state.bytes;
+  }
+  state.last_use = ++clock_;
+  return state.prepared;
+}
+
+void SurveyState::let_go(std::size_t i) {
+  ScanState& state = scans_[i];
+  if (!state.stored) spill_->store(i, state.prepared);
+  state.stored = true;
+  state.let_go = true;
+  held_bytes_ -= state.bytes;
+  PreparedScan& prepared = state.prepared;
+  prepared.cloud.reset();
+  prepared.model_cloud.reset();
+  prepared.probe.reset();
+  prepared.planes.reset();
+  prepared.used_points_cm.reset();
+  prepared.used_intensity.reset();
+  state.outcome.used_points_cm.reset();  // the map reads them back (MappingResult::map_points)
+  state.outcome.used_intensity.reset();
+}
+
+void SurveyState::release_over_budget() {
+  if (!spill_ || held_bytes_ <= budget_bytes_ || scans_.size() < 2) return;
+  std::vector<std::pair<std::uint64_t, std::size_t>> held;  // (last use, scan), the newest scan aside
+  for (std::size_t i = 0; i + 1 < scans_.size(); ++i) {
+    if (!scans_[i].let_go && scans_[i].prepared.cloud) held.emplace_back(scans_[i].last_use, i);
+  }
+  std::sort(held.begin(), held.end());
+  for (const auto& [use, i] : held) {
+    if (held_bytes_ <= budget_bytes_) break;
+    let_go(i);
+  }
+}
+
 void SurveyState::set_prepared(std::size_t i, PreparedScan prepared) {
+  ScanState& state = scans_[i];
+  if (spill_) {
+    const std::lock_guard lock(spill_mutex_);
+    if (!state.let_go) held_bytes_ -= state.bytes;
+    state.bytes = estimated_bytes(prepared);
+    held_bytes_ += state.bytes;
+    state.let_go = false;
+    state.stored = false;
+    state.last_use = ++clock_;
+  }
+  state.model_empty = !prepared.model_cloud || prepared.model_cloud->empty();
+  if (!state.model_empty) {
+    state.model_min = prepared.model_cloud->bounds_min();
+    state.model_max = prepared.model_cloud->bounds_max();
+  }
   ScanOutcome& outcome = scans_[i].outcome;
   outcome.points_in = prepared.points_in;
   outcome.points_used = prepared.used_points_cm ? prepared.used_points_cm->size() : 0;
@@ -71,9 +149,10 @@ void SurveyState::restore(std::size_t i, const ScanOutcome& saved) {
 }
 
 Bounds3d SurveyState::bounds_at(std::size_t i, const Pose& world_from_points) const {
-  const PreparedCloud& cloud = *scans_[i].prepared.model_cloud;
-  if (cloud.empty()) return {};
-  const std::array<Eigen::Vector3f, 2> corners = {cloud.bounds_min(), cloud.bounds_max()};
+  // From the box kept beside the clouds: asking every scan's bounds reads none back.
+  const ScanState& state = scans_[i];
+  if (state.model_empty) return {};
+  const std::array<Eigen::Vector3f, 2> corners = {state.model_min, state.model_max};
   return world_bounds(corners, world_from_points);
 }
 
@@ -94,7 +173,7 @@ std::vector<std::size_t> SurveyState::nearby(std::size_t i, const Pose& at, std:
 
 std::vector<WorldModel> SurveyState::models_of(std::span<const std::size_t> indices) const {
   std::vector<WorldModel> models;
-  for (const std::size_t j : indices) models.push_back({scans_[j].prepared.model_cloud.get(), pose(j)});
+  for (const std::size_t j : indices) models.push_back({prepared(j).model_cloud.get(), pose(j)});
   return models;
 }
 

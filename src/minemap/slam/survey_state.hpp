@@ -5,8 +5,17 @@
 // where its match began) and restore() (a resumed run). Every stage reads poses here and writes
 // them only through these. Also the spatial queries over the poses (bounds, nearby scans).
 //
-// Thread-safety: one thread writes; reads from parallel loops between writes are safe.
+// A memory bound (bound_memory, docs/scaling.md): the clouds of the scans least recently used are
+// written to a spill file and let go whenever those held come to more than the bound
+// (release_over_budget); prepared() reads a scan let go of back, the same clouds bit for bit.
+//
+// Thread-safety: one thread writes; reads from parallel loops between writes are safe (prepared()
+// reads back under a lock). release_over_budget is a write: it ends the references prepared() gave
+// to the scans it lets go of.
 #include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <mutex>
 #include <span>
 #include <vector>
 
@@ -14,6 +23,7 @@
 #include "minemap/registration/icp.hpp"
 #include "minemap/slam/mapping_result.hpp"
 #include "minemap/slam/scan_preparation.hpp"
+#include "minemap/slam/scan_spill.hpp"
 
 namespace minemap::detail {
 
@@ -23,7 +33,16 @@ class SurveyState {
   std::size_t add(const Scan& scan, PreparedScan prepared);
   std::size_t size() const { return scans_.size(); }
 
-  const PreparedScan& prepared(std::size_t i) const { return scans_[i].prepared; }
+  /// Scan i's clouds (read back from the spill when they were let go of).
+  const PreparedScan& prepared(std::size_t i) const;
+  /// Holds at most `held_bytes` of clouds (estimated: points, their trees, planes), the rest in
+  /// `spill`. Before the first add.
+  void bound_memory(std::shared_ptr<ScanSpill> spill, std::size_t held_bytes);
+  /// Lets go of the least recently used scans' clouds (never the newest scan's) until those held fit
+  /// the bound; nothing without one.
+  void release_over_budget();
+  /// Where the map points of the scans let go of are (null: no bound).
+  std::shared_ptr<const SpilledPoints> spilled() const { return spill_; }
   const ScanOutcome& outcome(std::size_t i) const { return scans_[i].outcome; }
   /// Current T_world_points.
   const Pose& pose(std::size_t i) const { return scans_[i].outcome.world_from_points; }
@@ -64,12 +83,27 @@ class SurveyState {
 
  private:
   struct ScanState {
-    PreparedScan prepared;
+    mutable PreparedScan prepared;  ///< its heavy parts null while let go of (prepared() reads them back)
     Pose odometry = Pose::Identity();          ///< initial T_world_points
     Pose points_from_file = Pose::Identity();  ///< T_points_file: pose_cm = world_from_points * this
     ScanOutcome outcome;                       ///< outcome.world_from_points: the current pose
+    Eigen::Vector3f model_min = Eigen::Vector3f::Zero(), model_max = Eigen::Vector3f::Zero();  ///< model's box
+    bool model_empty = true;
+    // The memory bound's bookkeeping (under spill_mutex_):
+    std::size_t bytes = 0;              ///< its clouds' estimated size while held
+    mutable std::uint64_t last_use = 0; ///< when prepared() last gave it out
+    mutable bool let_go = false;        ///< its clouds are in the spill, not here
+    bool stored = false;                ///< its clouds as they stand are in the spill
   };
+  /// Scan i's clouds into the spill (unless there already) and out of memory.
+  void let_go(std::size_t i);
+
   std::vector<ScanState> scans_;
+  std::shared_ptr<ScanSpill> spill_;
+  std::size_t budget_bytes_ = 0;
+  mutable std::mutex spill_mutex_;
+  mutable std::uint64_t clock_ = 0;
+  mutable std::size_t held_bytes_ = 0;  ///< of the scans not let go of
   std::size_t first_moved_ = static_cast<std::size_t>(-1);  ///< the first scan whose initial pose is its own
 };
 
