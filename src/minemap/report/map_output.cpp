@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "minemap/core/atomic_file.hpp"
+#include "minemap/core/memory.hpp"
 #include "minemap/report/map_html.hpp"
 #include "minemap/report/map_views.hpp"
 
@@ -178,6 +179,11 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
   std::vector<double> per_scan;
   for (const auto& s : result.scans) per_scan.push_back(s.match_s);
   report["timings_s"]["per_scan"] = per_scan;
+  // The process's memory as each scan was matched, and its peak so far (the writing included).
+  std::vector<double> resident;
+  for (const auto& s : result.scans) resident.push_back(s.resident_mb);
+  report["memory_mb"] = {{"per_scan", resident},
+                         {"peak", static_cast<double>(peak_resident_bytes()) / (1024.0 * 1024.0)}};
   if (truth) {
     report["truth"] = {{"odometry", errors_json(truth->odometry, unit_per_cm)},
                        {"registered", errors_json(truth->registered, unit_per_cm)}};

@@ -29,6 +29,9 @@ struct ScanOutcome {
   /// Seconds spent when this scan arrived: its own match and (kSimultaneous) the relaxation after
   /// it; the cost per new scan (loop closing and the last relaxation are in MappingResult::times).
   double match_s = 0;
+  /// The process's resident memory once this scan was matched, MB (0 where the system does not say):
+  /// a long survey's memory scan by scan (report.json "memory_mb", docs/scaling.md).
+  double resident_mb = 0;
   std::size_t points_in = 0;                ///< points read
   std::size_t points_used = 0;              ///< points after filtering, used for matching
   std::size_t outliers_replaced = 0;

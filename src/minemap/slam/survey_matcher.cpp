@@ -7,6 +7,8 @@
 
 #include <tbb/task_arena.h>
 
+#include "minemap/core/memory.hpp"
+
 namespace minemap::detail {
 
 SurveyMatcher::SurveyMatcher(const MappingSettings& settings, ComputeBackend& backend, RunControl control)
@@ -414,7 +416,7 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
   last_metascan_ = {};
   features_start_.reset();
   features_said_ = false;
-  state_.set_match_time(i, arrived.seconds());
+  state_.set_match_cost(i, arrived.seconds(), resident_bytes());
   control_.report(i + 1, to_string(settings_.mode));
 }
 

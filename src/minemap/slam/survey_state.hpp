@@ -69,7 +69,11 @@ class SurveyState {
   void restore(std::size_t i, const ScanOutcome& saved);
   void judged(std::size_t i, RegistrationHealth health) { scans_[i].outcome.health = std::move(health); }
   void count_relaxation_match(std::size_t i) { ++scans_[i].outcome.relaxation_matches; }
-  void set_match_time(std::size_t i, double seconds) { scans_[i].outcome.match_s = seconds; }
+  /// What scan i's arrival cost: seconds, and the process's resident memory after it (bytes).
+  void set_match_cost(std::size_t i, double seconds, std::size_t resident_bytes) {
+    scans_[i].outcome.match_s = seconds;
+    scans_[i].outcome.resident_mb = static_cast<double>(resident_bytes) / (1024.0 * 1024.0);
+  }
 
   /// World bounds of scan i's model at `world_from_points`, from its kd-tree's box (8 corners).
   Bounds3d bounds_at(std::size_t i, const Pose& world_from_points) const;
