@@ -64,8 +64,11 @@ def summarise(tag, report_path, time_path):
     }
 
 
-def polyline(xs, ys, x_of, y_of, colour):
-    points = " ".join(f"{x_of(x):.1f},{y_of(y):.1f}" for x, y in zip(xs, ys))
+def polyline(xs, ys, x_of, y_of, colour, most=1500):
+    # At most `most` vertices a line (every k-th scan): the page stays small for 10 000 scans.
+    xs, ys = list(xs), list(ys)
+    step = max(1, len(xs) // most)
+    points = " ".join(f"{x_of(x):.0f},{y_of(y):.1f}" for x, y in zip(xs[::step], ys[::step]))
     return f'<polyline fill="none" stroke="{colour}" stroke-width="1.2" points="{points}"/>'
 
 

@@ -289,7 +289,49 @@ TEST(SimDrive, LoopSurveyGoesAroundThePillarsAndBackToItsStart) {
     const std::vector<ScanStop> start = plan_loop_stops(settings.mine, world);
     ASSERT_EQ(start.size(), 5u);
     EXPECT_EQ(start[4].z_cm, stops[4].z_cm);
+    // A longer one drives round again: each lap starts at the first scan's place, and its stops are
+    // the first lap's again (their jitter aside, within a step).
+    const std::size_t lap = stops.size() - 1;
+    settings.mine.scans = static_cast<int>(2 * lap + 3);
+    const std::vector<ScanStop> laps = plan_loop_stops(settings.mine, world);
+    ASSERT_EQ(laps.size(), 2 * lap + 3);
+    for (const std::size_t k : {lap, 2 * lap}) {
+      EXPECT_EQ(laps[k].x_cm, stops.front().x_cm) << "seed " << seed << " stop " << k;
+      EXPECT_EQ(laps[k].z_cm, stops.front().z_cm) << "seed " << seed << " stop " << k;
+    }
+    for (std::size_t k = 1; k < lap; ++k) {
+      EXPECT_LT(std::hypot(laps[lap + k].x_cm - stops[k].x_cm, laps[lap + k].z_cm - stops[k].z_cm),
+                settings.mine.mean_step_cm) << "seed " << seed << " stop " << lap + k;
+    }
   }
+}
+
+// `minemap simulate` writes a long survey a part at a time: the same scans, bit for bit, as the
+// survey simulated at once, whatever the part's size; the truth and the distance alike.
+TEST(SimDrive, ASurveySimulatedInPartsIsTheSurveySimulatedAtOnce) {
+  SimulationSettings settings;
+  settings.mine.scans = 7;
+  const SimulatedSurvey whole = simulate_mine_survey(settings);
+  std::vector<Scan> scans;
+  std::vector<std::size_t> firsts;
+  const SimulatedSurvey parts =
+      simulate_mine_survey_in_parts(settings, 3, [&](std::vector<Scan>& part, std::size_t first, std::size_t total) {
+        EXPECT_EQ(total, 7u);
+        EXPECT_LE(part.size(), 3u);
+        firsts.push_back(first);
+        for (Scan& scan : part) scans.push_back(std::move(scan));
+      });
+  EXPECT_EQ(firsts, (std::vector<std::size_t>{0, 3, 6}));
+  EXPECT_TRUE(parts.scans.empty());
+  ASSERT_EQ(scans.size(), whole.scans.size());
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    EXPECT_EQ(scans[i].name, whole.scans[i].name);
+    EXPECT_TRUE(scans[i].pose_cm == whole.scans[i].pose_cm) << "scan " << i;
+    EXPECT_EQ(scans[i].points_cm, whole.scans[i].points_cm) << "scan " << i;
+    EXPECT_EQ(scans[i].slice_offsets, whole.scans[i].slice_offsets) << "scan " << i;
+  }
+  EXPECT_EQ(parts.truth_cm, whole.truth_cm);
+  EXPECT_EQ(parts.driven_distance_cm, whole.driven_distance_cm);
 }
 
 TEST(SimDrive, ElevationGainFollowsTheSetting) {

@@ -1,5 +1,7 @@
 // `minemap simulate`: the built-in simulated mine survey, written with its truth: the tilting
 // scanner's stop-and-go survey as uos (the default), or a moving LiDAR's sweeps as PCD.
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -103,7 +105,8 @@ CLI::App* add_simulate_command(CLI::App& app, SimulateOptions& options, MapOptio
   command->add_option("--seed", options.seed, "Random seed")->capture_default_str();
   command->add_option("--loop", options.loop_m,
                       "Drive a loop of about this many metres around the pillars right of the drive, back to the "
-                      "first scan's place, instead of the straight drive (0 = straight)")
+                      "first scan's place, instead of the straight drive (0 = straight); --scans more than one lap drives round "
+                      "again")
       ->check(CLI::NonNegativeNumber);
   CLI::Option* step = command
                           ->add_option("--step-m", options.step_m,
@@ -160,13 +163,24 @@ int run_simulate(const SimulateOptions& options) {
   settings.mine.loop_length_cm = 100.0 * options.loop_m;
   settings.mine.mean_step_cm = 100.0 * options.step_m;
   const auto start = std::chrono::steady_clock::now();
-  const auto survey = sim::simulate_mine_survey(settings);
-  fs::create_directories(options.out);
-  io::write_uos_survey(options.out, survey.scans, survey.truth_cm);
-  std::size_t points = 0;
-  for (const auto& scan : survey.scans) points += scan.size();
+  // A part at a time (8 scans a thread, simulated in parallel, then written): a survey of any length
+  // in the memory of one part. The folder is checked for the whole survey's count before the first.
+  std::size_t points = 0, scans = 0;
+  bool prepared = false;
+  const std::size_t part_scans = 8 * static_cast<std::size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  const sim::SimulatedSurvey survey =
+      sim::simulate_mine_survey_in_parts(settings, part_scans, [&](std::vector<Scan>& part, std::size_t first, std::size_t total) {
+        if (!prepared) {
+          io::prepare_uos_folder(options.out, total, true);
+          prepared = true;
+        }
+        io::write_uos_scans(options.out, first, part);
+        for (const Scan& scan : part) points += scan.size();
+        scans += part.size();
+      });
+  io::write_uos_truth(options.out, survey.truth_cm);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::printf("simulated %zu scans (%zu points, %.1f m driven) into %s in %.1f s\n", survey.scans.size(), points,
+  std::printf("simulated %zu scans (%zu points, %.1f m driven) into %s in %.1f s\n", scans, points,
               survey.driven_distance_cm / 100.0, options.out.c_str(), seconds);
   return 0;
 }

@@ -292,8 +292,16 @@ void set_foreign_survey_reader(ForeignSurveyReader reader);
 /// An .las/.laz/.e57 file, or a folder holding such files and no scans of the other layouts.
 bool is_foreign_survey(const fs::path& path);
 
-/// Writes a survey in uos layout (scanNNN.3d + .pose), and truth/ when given.
+/// Writes a survey in uos layout (scanNNN.3d + .pose), and truth/ when given: prepare_uos_folder,
+/// write_uos_scans, write_uos_truth in turn.
 void write_uos_survey(const fs::path& dir, std::span<const Scan> scans,
                       const std::optional<std::vector<Pose>>& truth_cm = std::nullopt);
+/// A survey written a part at a time (a long simulated one): the folder made, and refused (OutputError)
+/// where it holds a scan numbered `scan_count` or higher, or truth/ poses when `with_truth` is false.
+void prepare_uos_folder(const fs::path& dir, std::size_t scan_count, bool with_truth);
+/// Scans numbered first, first + 1, ...: scanNNN.3d and .pose.
+void write_uos_scans(const fs::path& dir, std::size_t first, std::span<const Scan> scans);
+/// truth/scanNNN.pose for each pose.
+void write_uos_truth(const fs::path& dir, std::span<const Pose> truth_cm);
 
 }  // namespace minemap::io

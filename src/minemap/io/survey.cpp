@@ -780,11 +780,7 @@ Survey read_survey_in_parts(const fs::path& dir, const SurveyReadSettings& setti
   return read_in_parts(dir, settings, part_scans, consume);
 }
 
-void write_uos_survey(const fs::path& dir, std::span<const Scan> scans, const std::optional<std::vector<Pose>>& truth_cm) {
-  if (truth_cm && truth_cm->size() != scans.size()) {
-    throw std::invalid_argument("write_uos_survey: " + std::to_string(truth_cm->size()) + " truth poses for " +
-                                std::to_string(scans.size()) + " scans");
-  }
+void prepare_uos_folder(const fs::path& dir, std::size_t scan_count, bool with_truth) {
   std::error_code error;
   fs::create_directories(dir, error);
   if (error) throw OutputError("cannot create " + dir.string() + ": " + error.message());
@@ -792,13 +788,13 @@ void write_uos_survey(const fs::path& dir, std::span<const Scan> scans, const st
   // join this one when the folder is read back, so it is refused.
   for (const auto& entry : fs::directory_iterator(dir, error)) {
     const auto number = uos_scan_number(entry.path().filename().string());
-    if (number && *number >= scans.size()) {
-      throw OutputError("cannot write a survey of " + std::to_string(scans.size()) + " scans into " + dir.string() +
+    if (number && *number >= scan_count) {
+      throw OutputError("cannot write a survey of " + std::to_string(scan_count) + " scans into " + dir.string() +
                         ": it already holds " + entry.path().filename().string() + " (use an empty folder)");
     }
   }
   // Likewise a truth/ folder left from an earlier survey would be read back as this one's truth.
-  if (!truth_cm) {
+  if (!with_truth) {
     for (const auto& entry : fs::directory_iterator(dir / "truth", error)) {
       if (entry.path().extension() == ".pose") {
         throw OutputError("cannot write a survey without truth into " + dir.string() + ": it already holds " +
@@ -806,16 +802,31 @@ void write_uos_survey(const fs::path& dir, std::span<const Scan> scans, const st
       }
     }
   }
-  for (std::size_t i = 0; i < scans.size(); ++i) {
-    const std::string stem = uos_stem(i);
-    write_uos_points(dir / (stem + ".3d"), scans[i]);
-    write_uos_pose(dir / (stem + ".pose"), scans[i].pose_cm);
+}
+
+void write_uos_scans(const fs::path& dir, std::size_t first, std::span<const Scan> scans) {
+  for (std::size_t k = 0; k < scans.size(); ++k) {
+    const std::string stem = uos_stem(first + k);
+    write_uos_points(dir / (stem + ".3d"), scans[k]);
+    write_uos_pose(dir / (stem + ".pose"), scans[k].pose_cm);
   }
-  if (truth_cm) {
-    fs::create_directories(dir / "truth", error);
-    if (error) throw OutputError("cannot create " + (dir / "truth").string() + ": " + error.message());
-    for (std::size_t i = 0; i < scans.size(); ++i) write_uos_pose(dir / "truth" / (uos_stem(i) + ".pose"), (*truth_cm)[i]);
+}
+
+void write_uos_truth(const fs::path& dir, std::span<const Pose> truth_cm) {
+  std::error_code error;
+  fs::create_directories(dir / "truth", error);
+  if (error) throw OutputError("cannot create " + (dir / "truth").string() + ": " + error.message());
+  for (std::size_t i = 0; i < truth_cm.size(); ++i) write_uos_pose(dir / "truth" / (uos_stem(i) + ".pose"), truth_cm[i]);
+}
+
+void write_uos_survey(const fs::path& dir, std::span<const Scan> scans, const std::optional<std::vector<Pose>>& truth_cm) {
+  if (truth_cm && truth_cm->size() != scans.size()) {
+    throw std::invalid_argument("write_uos_survey: " + std::to_string(truth_cm->size()) + " truth poses for " +
+                                std::to_string(scans.size()) + " scans");
   }
+  prepare_uos_folder(dir, scans.size(), truth_cm.has_value());
+  write_uos_scans(dir, 0, scans);
+  if (truth_cm) write_uos_truth(dir, *truth_cm);
 }
 
 }  // namespace minemap::io

@@ -1,7 +1,9 @@
 #pragma once
 // The built-in simulated mine survey: a tilting 2D laser scanner (the paper's Groundhog robot)
 // driving stop-and-go through a room-and-pillar mine. Deterministic for a seed.
+#include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "minemap/core/pose.hpp"
@@ -35,7 +37,7 @@ struct MineSettings {
   double drive_length_cm = 25000.0;  ///< 250 m, as the paper's run
   double elevation_gain_cm = 400.0;  ///< 4 m over the drive
   double mean_step_cm = 400.0;       ///< stop-and-go: metres between scan poses
-  int scans = 0;                     ///< 0 = as many as the drive needs at mean_step_cm
+  int scans = 0;                     ///< 0 = as many as the drive (or one lap of a loop) needs at mean_step_cm; a loop's extra scans drive more laps
   std::uint32_t seed = 1;
 
   // --- layout (x across the drive, y up, z along the drive; cm) ---
@@ -104,5 +106,14 @@ struct SimulatedSurvey {
 
 /// Simulates the survey, TBB-parallel over slices, bit-identical for a seed whatever the threads.
 SimulatedSurvey simulate_mine_survey(const SimulationSettings& settings);
+
+/// Receives a part of a simulated survey of `total` scans: its scans (with their points; the sink may
+/// take them), the first of which is the survey's scan `first`.
+using SimulatedPartSink = std::function<void(std::vector<Scan>& part, std::size_t first, std::size_t total)>;
+/// The same survey a part of `part_scans` scans at a time, each handed to `sink` and dropped after:
+/// a survey of any length in the memory of one part (`minemap simulate`). The same scans, bit for
+/// bit, as simulate_mine_survey's; the result holds the truth and the distance, no scans.
+SimulatedSurvey simulate_mine_survey_in_parts(const SimulationSettings& settings, std::size_t part_scans,
+                                              const SimulatedPartSink& sink);
 
 }  // namespace minemap::sim

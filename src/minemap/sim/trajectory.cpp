@@ -108,12 +108,14 @@ std::vector<ScanStop> plan_loop_stops(const MineSettings& settings, const MineWo
   };
   const int steps = std::max(4, static_cast<int>(std::lround(loop_cm / settings.mean_step_cm)));
   const double step = loop_cm / steps;
+  // One lap, back at the first scan's place; more scans than that drive round again (a patrol, each
+  // lap a return to known places: a long survey with loops, bench/scale.sh --loop).
   int count = steps + 1;
-  if (settings.scans > 0) count = std::min(count, settings.scans);
+  if (settings.scans > 0) count = settings.scans;
   std::vector<ScanStop> stops(static_cast<std::size_t>(count));
   for (int k = 0; k < count; ++k) {
     CounterRng rng(key_for(settings.seed, Stream::kDrive, kFirstStopStream + static_cast<std::uint64_t>(k)));
-    const bool end = k == 0 || k == steps;
+    const bool end = k % steps == 0;  // each lap starts where the first did
     const double s = k * step + (end ? 0.0 : settings.step_jitter * step * rng.uniform(-1.0, 1.0));
     const Eigen::Vector2d chord = at(s + 0.5 * step) - at(s - 0.5 * step);
     const double heading_noise_deg = settings.heading_sigma_deg * rng.normal();
