@@ -66,7 +66,7 @@ def compare_json(base, candidate, path=""):
     differences, new = [], []
     if isinstance(base, dict) and isinstance(candidate, dict):
         for key in base:
-            if (path == "" and key in ("timings_s", "version")) or key in WALL_CLOCK_KEYS:
+            if (path == "" and key in ("timings_s", "memory_mb", "version")) or key in WALL_CLOCK_KEYS:
                 continue
             where = f"{path}.{key}" if path else key
             if key not in candidate:

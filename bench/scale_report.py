@@ -44,6 +44,7 @@ def summarise(tag, report_path, time_path):
         "points": points,
         "wall_s": float(wall_s),
         "peak_rss_mb": int(peak_kb) / 1024.0,
+        "spilled_mb": report.get("memory_mb", {}).get("spilled"),
         "load_s": timings.get("load", 0.0),
         "matching_s": timings.get("pairwise", 0.0) + timings.get("relaxation", 0.0),
         "filter_s": timings.get("filter", 0.0),
@@ -114,17 +115,18 @@ def write_svg(path, runs):
 
 def table(runs):
     lines = ["| survey | scans | points | wall | per scan, first / last quarter | read | matching | loops | write "
-             "| peak RSS | RSS at 1/4, end of matching | mean error |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| peak RSS | RSS at 1/4, end of matching | spilled | mean error |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in runs:
         error = f'{r["mean_error_percent"]:.2f} % of the path' if r["mean_error_percent"] is not None else "-"
         quarter = f'{r["rss_at_quarter_mb"]:.0f} / {r["rss_at_end_mb"]:.0f} MB' if r["memory_mb"] else "-"
         loops = f'{r["loop_closure_s"]:.1f} s ({r["loops_closed"]}/{r["loops_tried"]} closed)'
+        spilled = f'{r["spilled_mb"]:.0f} MB' if r["spilled_mb"] is not None else "-"
         lines.append(
             f'| {r["tag"]} | {r["scans"]} | {r["points"] / 1e6:.0f} M | {r["wall_s"]:.0f} s '
             f'| {1000 * r["per_scan_first_quarter_s"]:.1f} / {1000 * r["per_scan_last_quarter_s"]:.1f} ms '
             f'| {r["load_s"]:.0f} s | {r["matching_s"]:.0f} s | {loops} | {r["write_s"]:.1f} s '
-            f'| {r["peak_rss_mb"] / 1024:.2f} GB | {quarter} | {error} |')
+            f'| {r["peak_rss_mb"] / 1024:.2f} GB | {quarter} | {spilled} | {error} |')
     return "\n".join(lines) + "\n"
 
 

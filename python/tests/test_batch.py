@@ -23,7 +23,7 @@ MAPPER = COMMAND or [sys.executable, "-m", "minemap"]  # the same, run directly 
 SCANS = 12  # about 1 s a map with one thread: time to kill a worker mid-survey
 # Measured: the only keys of report.json that differ between two runs of one survey (wall clocks, and
 # how each run was asked for).
-VOLATILE = {"timings_s", "command_line", "run_options"}
+VOLATILE = {"timings_s", "memory_mb", "command_line", "run_options"}
 
 
 @pytest.fixture(scope="module")

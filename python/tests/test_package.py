@@ -20,7 +20,7 @@ from conftest import default_sigint, run_cli
 
 # The only report fields that differ between two runs of one survey: wall clocks, and how each run
 # was asked for (its command line, and the options that change no pose: threads, backend, quiet).
-TIMING_KEYS = ("timings_s", "command_line", "run_options")
+TIMING_KEYS = ("timings_s", "memory_mb", "command_line", "run_options")
 
 
 def report_without_timings(path: Path) -> dict:

@@ -59,7 +59,7 @@ def assert_same_as_map(survey: Path, live: Path, tmp_path: Path):
             continue
         if path.name == "report.json":
             a, b = (json.loads(p.read_text()) for p in (path, live / "report.json"))
-            for key in ("timings_s", "command_line", "run_options"):  # wall clocks; how each run was asked for
+            for key in ("timings_s", "memory_mb", "command_line", "run_options"):  # wall clocks; how each run was asked for
                 a.pop(key), b.pop(key)
             assert a == b
         else:

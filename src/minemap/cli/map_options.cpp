@@ -273,6 +273,8 @@ void MapOptionTable::declare_loops(MapOptions& map, MappingSettings& mapping) {
        "Every pose graph edge weighs alike (not by its match's geometry)");
   number(g, "--loop-min-information-fraction", loops.min_information_fraction,
          "Every edge keeps at least this fraction of the sigmas' information in every direction");
+  number(g, "--loop-judge-max-scans", loops.judge_max_scans,
+         "After the relaxation each scan is judged again against this many nearest scans (0 = all near it)");
   number(g, "--loop-max-misclosure-fraction", loops.max_misclosure_fraction,
          "A loop that closes further apart than this fraction of its drive makes its scan doubtful (0 = never)");
   number(g, "--graph-translation-sigma-cm", loops.graph.translation_sigma_cm, "Pose graph: one edge's sigma (cm)");

@@ -183,7 +183,8 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
   std::vector<double> resident;
   for (const auto& s : result.scans) resident.push_back(s.resident_mb);
   report["memory_mb"] = {{"per_scan", resident},
-                         {"peak", static_cast<double>(peak_resident_bytes()) / (1024.0 * 1024.0)}};
+                         {"peak", static_cast<double>(peak_resident_bytes()) / (1024.0 * 1024.0)},
+                         {"spilled", static_cast<double>(result.spilled_bytes) / (1024.0 * 1024.0)}};
   if (truth) {
     report["truth"] = {{"odometry", errors_json(truth->odometry, unit_per_cm)},
                        {"registered", errors_json(truth->registered, unit_per_cm)}};

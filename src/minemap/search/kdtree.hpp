@@ -64,6 +64,11 @@ class KdTree {
   const Eigen::Vector3f& bounds_min() const { return bounds_min_; }
   const Eigen::Vector3f& bounds_max() const { return bounds_max_; }
   int bucket_size() const { return settings_.bucket_size; }
+  /// What the tree holds in memory (its nodes, points and leaf means), bytes.
+  std::size_t memory_bytes() const {
+    return nodes_.capacity() * sizeof(KdNode) + points_.capacity() * sizeof(KdPoint) +
+           leaf_means_.capacity() * sizeof(std::array<float, 4>);
+  }
 
  private:
   struct Builder;

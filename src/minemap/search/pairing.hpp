@@ -7,6 +7,7 @@
 // so the union of several models (simultaneous matching) needs no common world frame, and all sums
 // are centred on the data cloud's centroid (no precision loss for clouds far from any origin).
 #include <Eigen/Core>
+#include <atomic>
 #include <cstdint>
 #include <mutex>
 #include <span>
@@ -66,8 +67,17 @@ class PreparedCloud {
   const std::vector<Eigen::Vector3f>& point_vector() const { return points_; }
   /// The kd-tree over points(); built here on the first call when prepared with kOnFirstUse.
   const KdTree& tree() const {
-    std::call_once(built_, [this] { tree_ = KdTree(points_, tree_settings_); });
+    std::call_once(built_, [this] {
+      tree_ = KdTree(points_, tree_settings_);
+      tree_built_.store(true, std::memory_order_release);
+    });
     return tree_;
+  }
+  /// What the cloud holds in memory, bytes: its points, and its tree once built (a long survey's
+  /// memory bound counts it; a device's copies are not counted).
+  std::size_t memory_bytes() const {
+    return points_.capacity() * sizeof(Eigen::Vector3f) +
+           (tree_built_.load(std::memory_order_acquire) ? tree_.memory_bytes() : 0);
   }
   /// The points' bounding box (the tree's, without building it; zero for no points).
   const Eigen::Vector3f& bounds_min() const { return bounds_min_; }
@@ -85,6 +95,7 @@ class PreparedCloud {
   KdTreeSettings tree_settings_;
   mutable std::once_flag built_;
   mutable KdTree tree_;
+  mutable std::atomic<bool> tree_built_{false};
   Eigen::Vector3f bounds_min_ = Eigen::Vector3f::Zero();
   Eigen::Vector3f bounds_max_ = Eigen::Vector3f::Zero();
   Eigen::Vector3d centroid_cm_ = Eigen::Vector3d::Zero();

@@ -110,6 +110,8 @@ std::shared_ptr<const PreparedCloud> LocalMap::metascan(const SurveyState& state
     const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
     std::erase_if(near, [&](std::size_t j) { return j + gap < i; });
   }
+  const std::size_t most = static_cast<std::size_t>(settings_.loops.judge_max_scans);
+  if (whole_map && most > 0 && near.size() > most) near.resize(most);  // the nearest (nearby sorts them)
   return union_of(state, i, near, frame, at, grow_cm, thin_cm);
 }
 

@@ -32,8 +32,8 @@ std::vector<Eigen::Vector3f> first_point_per_cell(const std::vector<std::vector<
 class LocalMap {
  public:
   /// Which scans a metascan takes: the registered ones before the scan (while matching; with loops
-  /// on, only the last loops.min_scan_gap, so a loop is the pose graph's to close), or every scan
-  /// near it, earlier or later (judging the finished map).
+  /// on, only the last loops.min_scan_gap, so a loop is the pose graph's to close), or the scans
+  /// near it, earlier or later, the nearest loops.judge_max_scans (judging the finished map).
   enum class Scope { kEarlier, kWholeMap };
 
   LocalMap(const MappingSettings& settings, ComputeBackend& backend) : settings_(settings), backend_(backend) {}

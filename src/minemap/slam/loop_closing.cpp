@@ -138,9 +138,9 @@ void LoopClosing::doubt_unclosed_return(SurveyState& state, const LoopClosure& l
 }
 
 void LoopClosing::judge_again(SurveyState& state, const RunControl& control) const {
-  // The relaxation moved every scan: each is judged again where it ended, against the map of all
-  // scans near it. A scan that looked doubtful against a few recent scans (a corner that sees
-  // where the drive began) is then judged against the start too.
+  // The relaxation moved every scan: each is judged again where it ended, against the map of the
+  // scans nearest it (loops.judge_max_scans). A scan that looked doubtful against a few recent scans
+  // (a corner that sees where the drive began) is then judged against the start too.
   const double grow_cm = double(registration_.icp().max_pair_dist_cm);
   for (std::size_t k = 1; k < state.size() && !control.stop_requested(); ++k) {
     const RegistrationHealth& old = state.health(k);

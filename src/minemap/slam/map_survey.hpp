@@ -51,9 +51,11 @@ class SurveyMatcher;
 /// metascan near a return, a loop, the map's points), so memory follows the bound, not the survey.
 /// The result is the same with any bound.
 struct MemoryBound {
-  /// What `minemap map` holds: 1 200 simulated scans' clouds (about 0.4 MB each), so the surveys of
-  /// up to a thousand scans are never spilled, and a 10 000-scan one stays near 1 GB (docs/scaling.md).
-  static constexpr std::size_t kSuggestedHeldCloudsMb = 512;
+  /// What `minemap map` holds: about 1 200 simulated scans' clouds while they are only matched (0.3 MB
+  /// each; a loop's trees make them bigger), so a straight survey of a thousand scans is never
+  /// spilled, and 10 000 scans, or a thousand passing one place ten times, stay under 1.5 GB
+  /// (docs/scaling.md).
+  static constexpr std::size_t kSuggestedHeldCloudsMb = 384;
   /// Prepared clouds held at most (estimated: points, their kd-trees, planes), MB; 0: all held.
   std::size_t held_clouds_mb = 0;
   /// The folder the spill file is made in (unlinked at once: nothing stays there); the output folder.

@@ -4,6 +4,7 @@
 // (SurveyMatcher::result), never the state itself.
 //
 // Thread-safety: plain values.
+#include <cstdint>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -85,6 +86,7 @@ struct MappingResult {
   /// Where the scans whose used_points_cm are null keep them (a run with a memory bound); null: all
   /// in memory. Read them through map_points().
   std::shared_ptr<const SpilledPoints> spilled;
+  std::uint64_t spilled_bytes = 0;  ///< written to the spill (report.json memory_mb.spilled)
   std::string backend;       ///< the backend that made the poses: "cpu: ..." / "opencl: <device>"
   std::string backend_note;  ///< empty, or why another backend than the one handed in made them
   std::vector<std::string> notes;  ///< fallbacks, skipped filters

@@ -446,6 +446,7 @@ MappingResult SurveyMatcher::result() const {
   MappingResult result;
   result.scans = state_.outcomes();
   result.spilled = state_.spilled();
+  result.spilled_bytes = state_.spilled_bytes();
   result.backend = backend_name_;
   result.notes = notes_;
   result.times = control_.times();

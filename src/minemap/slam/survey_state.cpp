@@ -1,7 +1,12 @@
 #include "minemap/slam/survey_state.hpp"
 
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
 #include <algorithm>
 #include <array>
+#include <tuple>
 #include <utility>
 
 namespace minemap::detail {
@@ -24,15 +29,15 @@ std::size_t SurveyState::add(const Scan& scan, PreparedScan prepared) {
 
 namespace {
 
-/// A prepared scan's size in memory, estimated: its clouds' points and their kd-trees (about 8 bytes
-/// a point, built or not), the map's intensities, the planes' hash map (about 48 bytes a plane).
-std::size_t estimated_bytes(const PreparedScan& scan) {
-  std::size_t points = scan.cloud ? scan.cloud->points().size() : 0;
-  if (scan.model_cloud && scan.model_cloud != scan.cloud) points += scan.model_cloud->points().size();
-  if (scan.probe && scan.probe != scan.cloud) points += scan.probe->points().size();
-  const std::size_t intensity = scan.used_intensity ? scan.used_intensity->size() : 0;
-  const std::size_t planes = scan.planes ? scan.planes->planes() : 0;
-  return points * (sizeof(Eigen::Vector3f) + 8) + intensity * sizeof(float) + planes * 48;
+/// A prepared scan's size in memory: its clouds' points and the trees built so far, the map's
+/// intensities, the planes' hash map (about 48 bytes a plane, estimated).
+std::size_t memory_bytes(const PreparedScan& scan) {
+  std::size_t bytes = scan.cloud ? scan.cloud->memory_bytes() : 0;
+  if (scan.model_cloud && scan.model_cloud != scan.cloud) bytes += scan.model_cloud->memory_bytes();
+  if (scan.probe && scan.probe != scan.cloud) bytes += scan.probe->memory_bytes();
+  if (scan.used_intensity) bytes += scan.used_intensity->capacity() * sizeof(float);
+  if (scan.planes) bytes += scan.planes->planes() * 48;
+  return bytes;
 }
 
 }  // namespace
@@ -49,7 +54,6 @@ const PreparedScan& SurveyState::prepared(std::size_t i) const {
   if (state.let_go) {
     state.prepared = spill_->load(i, state.prepared);
     state.let_go = false;
-    held_bytes_ += state.bytes;
   }
   state.last_use = ++clock_;
   return state.prepared;
@@ -60,7 +64,6 @@ void SurveyState::let_go(std::size_t i) {
   if (!state.stored) spill_->store(i, state.prepared);
   state.stored = true;
   state.let_go = true;
-  held_bytes_ -= state.bytes;
   PreparedScan& prepared = state.prepared;
   prepared.cloud.reset();
   prepared.model_cloud.reset();
@@ -73,25 +76,34 @@ void SurveyState::let_go(std::size_t i) {
 }
 
 void SurveyState::release_over_budget() {
-  if (!spill_ || held_bytes_ <= budget_bytes_ || scans_.size() < 2) return;
-  std::vector<std::pair<std::uint64_t, std::size_t>> held;  // (last use, scan), the newest scan aside
-  for (std::size_t i = 0; i + 1 < scans_.size(); ++i) {
-    if (!scans_[i].let_go && scans_[i].prepared.cloud) held.emplace_back(scans_[i].last_use, i);
+  if (!spill_ || scans_.size() < 2) return;
+  // What the scans hold now (their trees are built on first use, so it is asked, not kept).
+  std::vector<std::tuple<std::uint64_t, std::size_t, std::size_t>> held;  // (last use, scan, bytes)
+  std::size_t total = 0;
+  for (std::size_t i = 0; i < scans_.size(); ++i) {
+    if (scans_[i].let_go || !scans_[i].prepared.cloud) continue;
+    const std::size_t bytes = memory_bytes(scans_[i].prepared);
+    total += bytes;
+    if (i + 1 < scans_.size()) held.emplace_back(scans_[i].last_use, i, bytes);  // never the newest
   }
+  if (total <= budget_bytes_) return;
   std::sort(held.begin(), held.end());
-  for (const auto& [use, i] : held) {
-    if (held_bytes_ <= budget_bytes_) break;
+  for (const auto& [use, i, bytes] : held) {
+    if (total <= budget_bytes_) break;
     let_go(i);
+    total -= bytes;
   }
+#if defined(__GLIBC__)
+  // The clouds were read back on worker threads, into their malloc arenas: freed there, the pages
+  // stay the process's until trimmed (a 10-lap survey's judging held 1.2 GB for 0.9 GB in use).
+  malloc_trim(0);
+#endif
 }
 
 void SurveyState::set_prepared(std::size_t i, PreparedScan prepared) {
   ScanState& state = scans_[i];
   if (spill_) {
     const std::lock_guard lock(spill_mutex_);
-    if (!state.let_go) held_bytes_ -= state.bytes;
-    state.bytes = estimated_bytes(prepared);
-    held_bytes_ += state.bytes;
     state.let_go = false;
     state.stored = false;
     state.last_use = ++clock_;

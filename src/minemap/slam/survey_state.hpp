@@ -35,7 +35,7 @@ class SurveyState {
 
   /// Scan i's clouds (read back from the spill when they were let go of).
   const PreparedScan& prepared(std::size_t i) const;
-  /// Holds at most `held_bytes` of clouds (estimated: points, their trees, planes), the rest in
+  /// Holds at most `held_bytes` of clouds (points, the trees built so far, planes), the rest in
   /// `spill`. Before the first add.
   void bound_memory(std::shared_ptr<ScanSpill> spill, std::size_t held_bytes);
   /// Lets go of the least recently used scans' clouds (never the newest scan's) until those held fit
@@ -43,6 +43,8 @@ class SurveyState {
   void release_over_budget();
   /// Where the map points of the scans let go of are (null: no bound).
   std::shared_ptr<const SpilledPoints> spilled() const { return spill_; }
+  /// Bytes written to the spill so far (0: no bound, or nothing let go of).
+  std::uint64_t spilled_bytes() const { return spill_ ? spill_->bytes() : 0; }
   const ScanOutcome& outcome(std::size_t i) const { return scans_[i].outcome; }
   /// Current T_world_points.
   const Pose& pose(std::size_t i) const { return scans_[i].outcome.world_from_points; }
@@ -94,7 +96,6 @@ class SurveyState {
     Eigen::Vector3f model_min = Eigen::Vector3f::Zero(), model_max = Eigen::Vector3f::Zero();  ///< model's box
     bool model_empty = true;
     // The memory bound's bookkeeping (under spill_mutex_):
-    std::size_t bytes = 0;              ///< its clouds' estimated size while held
     mutable std::uint64_t last_use = 0; ///< when prepared() last gave it out
     mutable bool let_go = false;        ///< its clouds are in the spill, not here
     bool stored = false;                ///< its clouds as they stand are in the spill
@@ -107,7 +108,6 @@ class SurveyState {
   std::size_t budget_bytes_ = 0;
   mutable std::mutex spill_mutex_;
   mutable std::uint64_t clock_ = 0;
-  mutable std::size_t held_bytes_ = 0;  ///< of the scans not let go of
   std::size_t first_moved_ = static_cast<std::size_t>(-1);  ///< the first scan whose initial pose is its own
 };
 
