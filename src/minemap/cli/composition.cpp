@@ -108,6 +108,18 @@ MapRun map_with(const MapCommand& command, io::Survey survey, double load_s, Bac
   return run;
 }
 
+/// Where a run's spill file is made (MemoryBound; unlinked at once): the output folder, or, while it
+/// does not exist yet, the nearest folder above it that does (a run that fails must not leave an
+/// empty output folder behind); the temp folder for a run with no output folder (the Python API).
+fs::path spill_folder(const fs::path& out) {
+  std::error_code error;
+  fs::path folder = out.empty() ? fs::temp_directory_path(error) : fs::absolute(out, error);
+  while (!fs::is_directory(folder, error) && folder.has_parent_path() && folder != folder.parent_path()) {
+    folder = folder.parent_path();
+  }
+  return folder;
+}
+
 /// The survey read a part at a time and each part mapped as it comes (PartwiseMapper): its raw
 /// points are never all held. The console's survey lines come after the matching.
 MapRun map_in_parts(const MapCommand& command, BackendChoice backend, const ProgressCallback& progress,
@@ -120,7 +132,7 @@ MapRun map_in_parts(const MapCommand& command, BackendChoice backend, const Prog
   std::size_t survey_scans = 0;  // the folder's, however many were read before a stop
   with_threads(options, [&] {
     PartwiseMapper mapper(command.settings, *run.backend.backend, progress, stop_requested,
-                          MemoryBound{.held_clouds_mb = options.held_clouds_mb, .spill_folder = options.out});
+                          MemoryBound{.held_clouds_mb = options.held_clouds_mb, .spill_folder = spill_folder(options.out)});
     auto reading = Clock::now();
     // A part of 4 scans a thread: the files are parsed in parallel, and matched as the next is read.
     const std::size_t part_scans = 4 * static_cast<std::size_t>(thread_count(options));

@@ -58,7 +58,8 @@ struct MemoryBound {
   static constexpr std::size_t kSuggestedHeldCloudsMb = 384;
   /// Prepared clouds held at most (estimated: points, their kd-trees, planes), MB; 0: all held.
   std::size_t held_clouds_mb = 0;
-  /// The folder the spill file is made in (unlinked at once: nothing stays there); the output folder.
+  /// The folder the spill file is made in (it must exist; the file is unlinked at once: nothing stays
+  /// there): the output folder, or the nearest one above it.
   std::filesystem::path spill_folder;
 };
 

@@ -21,8 +21,6 @@ namespace {
 
 ScanSpill::ScanSpill(const std::filesystem::path& folder, const MappingSettings& settings, ComputeBackend& backend)
     : settings_(settings), backend_(backend) {
-  std::error_code ignored;
-  std::filesystem::create_directories(folder, ignored);
   // A name of our own (pid and address), made exclusively, then unlinked: only this process sees it.
   path_ = folder / (".minemap-spill-" + std::to_string(::getpid()) + "-" +
                     std::to_string(reinterpret_cast<std::uintptr_t>(this)));

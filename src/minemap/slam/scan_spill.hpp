@@ -28,7 +28,8 @@ namespace minemap::detail {
 
 class ScanSpill final : public SpilledPoints {
  public:
-  /// Opens the (unlinked) file in `folder`. Throws OutputError when it cannot be made there.
+  /// Opens the (unlinked) file in `folder`, which must exist. Throws OutputError when it cannot be
+  /// made there.
   /// `settings` and `backend` must outlive the spill's loads (a result holding it reads only points).
   ScanSpill(const std::filesystem::path& folder, const MappingSettings& settings, ComputeBackend& backend);
   ~ScanSpill() override;
