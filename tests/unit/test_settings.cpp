@@ -126,7 +126,7 @@ TEST(CommandLine, EveryMappingOptionChangesTheSettings) {
   const std::set<std::string> not_mapping = {"--threads", "--held-clouds-mb", "--opencl-device", "--backend", "--quiet",
                                              "--accept-doubtful", "--write-unregistered", "--unit",
                                              "--points-per-slice", "--no-slice-detection", "--initial-poses",
-                                             "--reference-poses", "--right-handed-to-3dtk", "--preset"};
+                                             "--reference-poses", "--right-handed-to-3dtk", "--preset", "--control"};
   std::size_t checked = 0;
   for (const cli::OptionInfo& option : cli::map_options()) {
     if (not_mapping.count(option.name)) continue;

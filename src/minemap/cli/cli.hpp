@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "minemap/backend/make_backend.hpp"
+#include "minemap/io/control.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/report/map_output.hpp"
 #include "minemap/slam/map_survey.hpp"
@@ -53,6 +54,7 @@ struct MapOptions {
   bool no_slice_detection = false;
   fs::path initial_poses;
   fs::path reference_poses;
+  fs::path control;  ///< survey control (io/control.hpp): the map tied to the mine's grid
   bool right_handed_to_3dtk = false;
   bool quiet = false;
   bool write_unregistered = false;
@@ -120,6 +122,8 @@ struct MapRun {
   /// The errors against the survey's reference poses (where it has them), computed once for the
   /// console and report.json alike.
   std::optional<TruthComparison> truth;
+  /// --control, read before the mapping (slam/control_tie.hpp ties the result to it).
+  std::optional<io::ControlFile> control;
 };
 
 /// Writes a run's outputs into options.out, atomically file by file (report/map_output.hpp).

@@ -45,6 +45,7 @@ int run_map(const MapCommand& command, const Hooks& hooks) {
   }
   if (signals::interrupted()) throw signals::Interrupted{};  // arrived while writing: the outputs are complete
   print_loops(options, result);
+  print_control(options, result);
   if (!options.quiet) {
     // The first pass matches each new scan against the previous one (pairwise, simultaneous) or
     // against the metascan (incremental): name it as it ran.

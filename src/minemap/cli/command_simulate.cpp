@@ -12,6 +12,8 @@
 
 #include "minemap/cli/commands.hpp"
 #include "minemap/core/error.hpp"
+#include "minemap/io/control.hpp"
+#include "minemap/sim/survey_control.hpp"
 
 namespace minemap::cli {
 namespace {
@@ -88,6 +90,39 @@ int run_moving_simulate(const SimulateOptions& options, sim::MovingSensor sensor
   return 0;
 }
 
+/// DIR/control.txt (sim/survey_control.hpp) and DIR/control_truth.tum: each scan's true pose in the
+/// grid (east, north, height, metres; the scanner's frame turned z up as the map's outputs are).
+void write_simulated_control(const SimulateOptions& options, const sim::SimulatedSurvey& survey) {
+  sim::ControlSimulationSettings settings;
+  settings.stations = options.control_stations;
+  settings.blunder_m = options.control_blunder_m;
+  settings.seed = options.seed;
+  std::vector<std::string> names;
+  for (std::size_t k = 0; k < survey.truth_cm.size(); ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "scan%03zu", k);
+    names.emplace_back(name);
+  }
+  const sim::SimulatedControl control = sim::simulate_control(survey.truth_cm, names, settings);
+  std::vector<std::string> comment{
+      "minemap simulate --control " + std::to_string(settings.stations) + ": survey stations of the simulated mine",
+      "grid: the mine turned " + std::to_string(settings.grid_rotation_deg) + " deg about the vertical, then shifted",
+      "sigma " + std::to_string(settings.sigma_horizontal_m) + " m, drawn as noise on every coordinate"};
+  if (!control.blunder.empty()) {
+    comment.push_back("blunder: " + control.blunder + " is " + std::to_string(settings.blunder_m) + " m off, eastwards");
+  }
+  io::write_control(options.out / "control.txt", control.file, comment);
+  // The truth in the grid as the map's trajectory.tum is written: z up, metres, absolute.
+  Eigen::Matrix4d turn = Eigen::Matrix4d::Identity();
+  turn.block<3, 3>(0, 0) << 0, 0, 1, -1, 0, 0, 0, 1, 0;  // 3DTK's axes to right-handed, z up
+  std::vector<io::TimedPose> truth;
+  for (std::size_t k = 0; k < survey.truth_cm.size(); ++k) {
+    const Pose in_grid = control.grid_from_mine_cm * survey.truth_cm[k] * turn.transpose();
+    truth.push_back({static_cast<double>(k), in_grid});
+  }
+  io::write_tum(options.out / "control_truth.tum", truth, LengthUnit::kMetre);
+}
+
 }  // namespace
 
 CLI::App* add_simulate_command(CLI::App& app, SimulateOptions& options, MapOptions& process) {
@@ -142,6 +177,14 @@ CLI::App* add_simulate_command(CLI::App& app, SimulateOptions& options, MapOptio
   command->add_option_function<double>(
       "--turn-deg-s", [&options](double v) { options.turn_deg_s = v; },
       "Moving sensors: peak rate of an extra yaw weave on top of the path's heading (deg/s; default 0)");
+  command->add_option("--control", options.control_stations,
+                      "Tilting: write DIR/control.txt, survey stations under this many scan positions (3 or more, "
+                      "evenly along the drive) in a mine grid turned and shifted like a UTM one, measured to 5 mm; "
+                      "and DIR/control_truth.tum, the true poses in that grid (README, \"Survey control\")")
+      ->check(CLI::NonNegativeNumber);
+  command->add_option("--control-blunder-m", options.control_blunder_m,
+                      "Tilting, with --control: the middle station's coordinates this many metres off (a blunder)")
+      ->check(CLI::NonNegativeNumber);
   command->add_flag("--odometry", options.odometry,
                     "Moving sensors: the scans carry drifting odometry (PCD VIEWPOINT, and DIR/odometry.tum); "
                     "default none (identity)");
@@ -151,6 +194,12 @@ CLI::App* add_simulate_command(CLI::App& app, SimulateOptions& options, MapOptio
 int run_simulate(const SimulateOptions& options) {
   if (options.sensor != kTilting) {
     return run_moving_simulate(options, parse_named(sim::kMovingSensorNames, options.sensor, "sensor"));
+  }
+  if (options.control_stations > 0 && options.control_stations < 3) {
+    throw std::invalid_argument("--control needs 3 stations at least (a tie needs 3 points not in a line)");
+  }
+  if (options.control_blunder_m > 0.0 && options.control_stations == 0) {
+    throw std::invalid_argument("--control-blunder-m plants a blunder among --control's stations: give --control N");
   }
   if (options.speed_mps || options.rate_hz || options.beams || options.turn_deg_s || options.odometry) {
     throw std::invalid_argument(
@@ -179,6 +228,7 @@ int run_simulate(const SimulateOptions& options) {
         scans += part.size();
       });
   io::write_uos_truth(options.out, survey.truth_cm);
+  if (options.control_stations > 0) write_simulated_control(options, survey);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::printf("simulated %zu scans (%zu points, %.1f m driven) into %s in %.1f s\n", scans, points,
               survey.driven_distance_cm / 100.0, options.out.c_str(), seconds);

@@ -63,6 +63,9 @@ struct SimulateOptions {
   std::optional<int> beams;
   std::optional<double> turn_deg_s;
   bool odometry = false;
+  // Tilting only: survey control (DIR/control.txt).
+  int control_stations = 0;
+  double control_blunder_m = 0.0;
 };
 /// `minemap simulate` (command_simulate.cpp).
 int run_simulate(const SimulateOptions& options);

@@ -14,6 +14,7 @@
 #include "minemap/cli/map_options.hpp"
 #include "minemap/cli/signals.hpp"
 #include "minemap/core/error.hpp"
+#include "minemap/slam/control_tie.hpp"
 
 namespace minemap::cli {
 
@@ -80,20 +81,38 @@ std::vector<OptionInfo> map_options(Preset preset) {
 namespace {
 
 /// A mapped run's survey-wide figures: how many scans, the interrupted run cut to what it matched,
-/// the comparison with the truth.
-void finish_run(MapRun& run) {
+/// the tie to control (a whole run's), the comparison with the truth.
+void finish_run(const MapCommand& command, MapRun& run) {
   run.survey_scans = run.result.scans.size();
   if (run.result.interrupted) {
     run.result.scans.resize(run.result.scans_matched);
     if (run.survey.truth_cm) run.survey.truth_cm->resize(run.result.scans_matched);
+  } else if (run.control) {
+    with_threads(command.options, [&] {
+      tie_to_control(run.result, *run.control, run.survey.frame_3dtk, command.settings.control,
+                     command.settings.loops.graph);
+    });
   }
   run.truth = compare_with_truth(run.result, run.survey.truth_cm);
+}
+
+/// --control, read before anything is mapped (a bad file costs no mapping), its scans checked
+/// against the survey folder's where the folder names them first.
+std::optional<io::ControlFile> read_control_for(const MapOptions& options) {
+  if (options.control.empty()) return std::nullopt;
+  io::ControlFile control = io::read_control(options.control);
+  if (!options.survey.empty() && !io::is_foreign_survey(options.survey)) {
+    const std::vector<std::string> names = io::ready_scan_names(options.survey);
+    if (!names.empty()) io::check_control_scans(control, names);
+  }
+  return control;
 }
 
 MapRun map_with(const MapCommand& command, io::Survey survey, double load_s, BackendChoice backend,
                 const ProgressCallback& progress, const StopRequested& stop_requested) {
   const MapOptions& options = command.options;
   MapRun run;
+  run.control = read_control_for(options);
   run.survey = std::move(survey);
   run.sources = sources_of(run.survey);
   run.load_s = load_s;
@@ -104,7 +123,7 @@ MapRun map_with(const MapCommand& command, io::Survey survey, double load_s, Bac
     return map_survey_releasing_points(run.survey.scans, command.settings, *run.backend.backend, progress,
                                        stop_requested);
   });
-  finish_run(run);
+  finish_run(command, run);
   return run;
 }
 
@@ -126,6 +145,7 @@ MapRun map_in_parts(const MapCommand& command, BackendChoice backend, const Prog
                     const StopRequested& stop_requested) {
   const MapOptions& options = command.options;
   MapRun run;
+  run.control = read_control_for(options);
   run.backend = std::move(backend);
   using Clock = std::chrono::steady_clock;
   double read_s = 0.0;
@@ -151,7 +171,7 @@ MapRun map_in_parts(const MapCommand& command, BackendChoice backend, const Prog
   run.load_s = read_s;
   run.sources = sources_of(run.survey);
   if (!options.quiet) print_survey(options, run);
-  finish_run(run);
+  finish_run(command, run);
   run.survey_scans = std::max(run.survey_scans, survey_scans);
   return run;
 }

@@ -1,5 +1,7 @@
 #include "minemap/cli/console.hpp"
 
+#include "minemap/slam/control_tie.hpp"
+
 #include <chrono>
 #include <unistd.h>
 
@@ -167,6 +169,33 @@ void print_loops(const MapOptions& options, const MappingResult& result) {
                    "drift over the loop stays in the map\n",
                    to.c_str(), from.c_str(), loop.doubt.c_str());
     }
+  }
+}
+
+void print_control(const MapOptions& options, const MappingResult& result) {
+  if (!result.control || options.quiet) return;
+  const ControlTie& tie = *result.control;
+  say(stdout, "control: %d of %zu points tied (rms %.1f mm; the map bent up to %.1f cm beyond a rigid move)%s\n",
+      tie.points_used, tie.residuals.size(), 1000.0 * tie.rms_m, tie.bent_max_cm,
+      tie.epsg ? (", EPSG:" + std::to_string(*tie.epsg)).c_str() : "");
+  say(stdout, "  %-10s %9s %9s %9s %9s %7s\n", "point", "E mm", "N mm", "H mm", "3D mm", "sigmas");
+  for (const ControlResidual& r : tie.residuals) {
+    say(stdout, "  %-10s %+9.1f %+9.1f %+9.1f %9.1f %7.2f%s\n", r.point.c_str(), 1000.0 * r.residual_m.x(),
+        1000.0 * r.residual_m.y(), 1000.0 * r.residual_m.z(), 1000.0 * r.residual_m.norm(), r.sigmas,
+        r.blunder ? "  blunder: left out" : "");
+  }
+  double largest_cm = 0.0;
+  std::size_t largest = 0;
+  for (std::size_t i = 0; i < result.scans.size(); ++i) {
+    const double axis = scan_sigma(result.scans[i]).axes_cm.x();
+    if (axis > largest_cm) {
+      largest_cm = axis;
+      largest = i;
+    }
+  }
+  if (!result.scans.empty()) {
+    say(stdout, "  scan sigma: largest %.1f cm (%s); report.json scans[].sigma\n", largest_cm,
+        result.scans[largest].name.c_str());
   }
 }
 

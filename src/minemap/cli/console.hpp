@@ -55,6 +55,8 @@ void print_loops(const MapOptions& options, const MappingResult& result);
 /// What the matches came to, in one paragraph: scans trusted, retried, doubtful and not registered,
 /// the median and worst rms, the loops closed (print_loops gives their gaps).
 void print_summary(const MappingResult& result);
+/// A tie to control: the residual of each control point (E N H and 3D, mm), blunders named.
+void print_control(const MapOptions& options, const MappingResult& result);
 
 /// What the matches came to: the scans not registered and the doubtful ones, each named on stderr
 /// with its file (`sources`, one per scan).

@@ -140,6 +140,9 @@ void MapOptionTable::declare_input(MapOptions& map) {
   text(g, "--reference-poses", map.reference_poses,
        "Reference poses for the error report, any survey (formats as --initial-poses)");
   flag(g, "--right-handed-to-3dtk", map.right_handed_to_3dtk, "Convert right-handed input to 3DTK's frame");
+  text(g, "--control", map.control,
+       "Survey control: known points in the mine's grid and the scans that observe them (README, \"Survey "
+       "control\"); the map, its outputs and exports are then in the grid, each scan with its sigma");
 }
 
 void MapOptionTable::declare_reduction(MapOptions& map, MappingSettings& mapping) {
@@ -312,6 +315,7 @@ void finish_settings(MapCommand& command) {
   if (options.no_recovery) settings.recovery.enabled = false;
   if (options.no_loops) settings.loops.enabled = false;
   if (options.loop_edges_alike) settings.loops.information_from_geometry = false;
+  if (!options.control.empty()) settings.control.keep_graph = true;
   settings.validate();
 }
 

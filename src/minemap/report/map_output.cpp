@@ -1,5 +1,7 @@
 #include "minemap/report/map_output.hpp"
 
+#include "minemap/slam/control_tie.hpp"
+
 #include <cmath>
 
 #include <tbb/parallel_for.h>
@@ -168,6 +170,45 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                      {"gap_after_deg", loop.gap_after_deg}});
   }
   report["loop_closures"] = loops;
+  if (result.control) {
+    // A tie to control: the poses above are in the grid, less its origin (in the survey's frame and
+    // unit, as "origin" is); origin_grid_m is the same point as east, north, height.
+    const ControlTie& tie = *result.control;
+    const Eigen::Vector3d grid_m = survey_axes_to_grid(tie.origin_cm, output.survey_in_3dtk_frame) / 100.0;
+    nlohmann::json residuals = nlohmann::json::array();
+    for (const ControlResidual& r : tie.residuals) {
+      nlohmann::json scans_of = nlohmann::json::array();
+      for (const std::size_t k : r.scans) scans_of.push_back(result.scans[k].name);
+      residuals.push_back({{"point", r.point},
+                           {"scans", scans_of},
+                           {"east_mm", 1000.0 * r.residual_m.x()},
+                           {"north_mm", 1000.0 * r.residual_m.y()},
+                           {"height_mm", 1000.0 * r.residual_m.z()},
+                           {"distance_mm", 1000.0 * r.residual_m.norm()},
+                           {"sigmas", r.sigmas},
+                           {"sigma_horizontal_mm", 1000.0 * r.sigma_horizontal_m},
+                           {"sigma_vertical_mm", 1000.0 * r.sigma_vertical_m},
+                           {"blunder", r.blunder}});
+    }
+    report["control"] = {{"file", tie.file},
+                         {"epsg", tie.epsg ? nlohmann::json(*tie.epsg) : nlohmann::json(nullptr)},
+                         {"origin", {tie.origin_cm.x() * unit_per_cm, tie.origin_cm.y() * unit_per_cm,
+                                     tie.origin_cm.z() * unit_per_cm}},
+                         {"origin_grid_m", {grid_m.x(), grid_m.y(), grid_m.z()}},
+                         {"points_used", tie.points_used},
+                         {"rms_mm", 1000.0 * tie.rms_m},
+                         {"bent_max", tie.bent_max_cm * unit_per_cm},
+                         {"bent_mean", tie.bent_mean_cm * unit_per_cm},
+                         {"residuals", residuals}};
+    nlohmann::json& scans_json = report["scans"];
+    for (std::size_t i = 0; i < result.scans.size(); ++i) {
+      if (!result.scans[i].covariance) continue;
+      const ScanSigma sigma = scan_sigma(result.scans[i]);
+      scans_json[i]["sigma"] = {{"axes", {sigma.axes_cm.x() * unit_per_cm, sigma.axes_cm.y() * unit_per_cm,
+                                          sigma.axes_cm.z() * unit_per_cm}},
+                                {"rotation_deg", sigma.rotation_deg}};
+    }
+  }
   report["timings_s"] = {{"load", output.load_s},
                          {"filter", result.times.filter_s},
                          {"tree_build", result.times.tree_build_s},
@@ -303,7 +344,14 @@ void write_map_ply(const std::filesystem::path& path, const MappingResult& resul
                      "frame: metres, right-handed, z up" + std::string(output.survey_in_3dtk_frame
                                                                            ? " (turned from the survey's 3DTK frame)"
                                                                            : "")};
-  if (!output.origin_cm.isZero()) {
+  if (result.control) {
+    const Eigen::Vector3d grid = survey_axes_to_grid(result.control->origin_cm, output.survey_in_3dtk_frame) / 100.0;
+    char text[200];
+    std::snprintf(text, sizeof text, "grid: add the origin %.3f %.3f %.3f m (east north height; report.json control)",
+                  grid.x(), grid.y(), grid.z());
+    layout.comments.push_back(text);
+    if (result.control->epsg) layout.comments.push_back("crs: EPSG:" + std::to_string(*result.control->epsg));
+  } else if (!output.origin_cm.isZero()) {
     const Eigen::Vector3d origin = output.origin_cm / 100.0;
     layout.comments.push_back("local frame: add the survey's origin " + std::to_string(origin.x()) + " " +
                               std::to_string(origin.y()) + " " + std::to_string(origin.z()) +

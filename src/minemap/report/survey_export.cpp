@@ -85,6 +85,12 @@ SurveyExport::SurveyExport(const std::filesystem::path& out_dir, ExportSettings 
     if (origin.size() != 3) fail(report_path_, "holds an origin that is not 3 numbers");
     origin_cm_ = Eigen::Vector3d(origin[0], origin[1], origin[2]) * cm;
   }
+  output_origin_cm_ = origin_cm_;
+  if (report.contains("control")) {  // a map tied to control: its poses are in the grid, less its origin
+    const auto origin = field(report["control"], "origin", report_path_).get<std::vector<double>>();
+    if (origin.size() != 3) fail(report_path_, "holds a control origin that is not 3 numbers");
+    output_origin_cm_ = Eigen::Vector3d(origin[0], origin[1], origin[2]) * cm;
+  }
   const std::set<std::string> wanted(settings_.scans.begin(), settings_.scans.end());
   std::set<std::string> found;
   const json& scans = field(report, "scans", report_path_);
@@ -124,12 +130,14 @@ std::string SurveyExport::frame_description() const {
 }
 
 Eigen::Vector3d SurveyExport::place(const Eigen::Vector3d& world_cm) const {
-  const Eigen::Vector3d survey_cm = world_cm + origin_cm_;
+  const Eigen::Vector3d survey_cm = world_cm + output_origin_cm_;
   if (settings_.frame == ExportSettings::Frame::kSurvey) return survey_cm / centimetres_per(survey_unit_);
   return survey_3dtk_ ? threedtk_to_right_handed(survey_cm, 0.01) : survey_cm / 100.0;
 }
 
-Eigen::Vector3d SurveyExport::origin() const { return origin_cm_.isZero() ? origin_cm_ : place(Eigen::Vector3d::Zero()); }
+Eigen::Vector3d SurveyExport::origin() const {
+  return output_origin_cm_.isZero() ? output_origin_cm_ : place(Eigen::Vector3d::Zero());
+}
 
 ExportedScan SurveyExport::read(const Planned& planned) const {
   io::ReadSettings read;

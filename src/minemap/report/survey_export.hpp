@@ -90,7 +90,8 @@ class SurveyExport {
   LengthUnit survey_unit_ = LengthUnit::kCentimetre;
   bool survey_3dtk_ = false;
   bool right_handed_to_3dtk_ = false;
-  Eigen::Vector3d origin_cm_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d origin_cm_ = Eigen::Vector3d::Zero();         ///< the files' local frame (report "origin")
+  Eigen::Vector3d output_origin_cm_ = Eigen::Vector3d::Zero();  ///< the poses' (a control tie's grid origin)
   std::vector<Planned> plan_;
   std::vector<std::string> skipped_;
   std::size_t next_ = 0;

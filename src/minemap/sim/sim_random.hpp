@@ -41,6 +41,7 @@ enum class Stream : std::uint64_t {
   kDrive,
   kOdometry,
   kBeam,
+  kControl,
 };
 
 /// The key of one purpose's stream under a seed, refined by ids.

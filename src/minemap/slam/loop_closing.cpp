@@ -159,7 +159,8 @@ void LoopClosing::judge_again(SurveyState& state, const RunControl& control) con
   }
 }
 
-std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl& control) const {
+std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl& control,
+                                            std::vector<PoseGraphEdge>* graph) const {
   std::vector<LoopClosure> loops;
   const std::size_t n = state.size();
   if (n <= static_cast<std::size_t>(settings_.loops.min_scan_gap)) return loops;
@@ -208,6 +209,7 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
   const std::size_t chain_edges = edges.size();
   edges.insert(edges.end(), loop_edges.begin(), loop_edges.end());
   const PoseGraphResult relaxed = optimise_pose_graph(poses, edges, 0, settings_.loops.graph);
+  if (graph) *graph = edges;
   for (std::size_t k = 1; k < n; ++k) state.place(k, relaxed.poses[k]);
   judge_again(state, control);
   std::size_t edge = chain_edges;

@@ -33,8 +33,13 @@ class LoopClosing {
       : settings_(settings), backend_(backend), registration_(registration), local_map_(local_map) {}
 
   /// Every loop candidate tried (closed or not); the scans it moved are placed in `state`. A stop
-  /// request ends it early with what it tried by then.
-  std::vector<LoopClosure> close(SurveyState& state, const RunControl& control) const;
+  /// request ends it early with what it tried by then. `graph` (when given) receives the pose graph
+  /// the relaxation solved, the chain as matched and the loops' edges; empty when no loop closed.
+  std::vector<LoopClosure> close(SurveyState& state, const RunControl& control,
+                                 std::vector<PoseGraphEdge>* graph = nullptr) const;
+  /// The chain of scan-to-scan steps as the scans stand, each with its match's information: the
+  /// pose graph's first edges (and the whole graph of a survey with no loop).
+  std::vector<PoseGraphEdge> chain(SurveyState& state) const;
 
  private:
   struct Candidate {
@@ -51,8 +56,6 @@ class LoopClosing {
   /// A return none of whose candidates closed, where a match converged but was not trusted: the
   /// map's drift over the loop stays, unmeasured; the return's scan is judged doubtful.
   void doubt_unclosed_return(SurveyState& state, const LoopClosure& loop) const;
-  /// The chain of scan-to-scan steps as the scans stand (step 3's first edges).
-  std::vector<PoseGraphEdge> chain(SurveyState& state) const;
   /// The information of the edge `from` -> `to` (`to` at `to_pose`), from the geometry of their pairs.
   Matrix6d edge_information(const SurveyState& state, std::size_t from, std::size_t to, const Pose& to_pose) const;
   /// Whether edge information comes from geometry for an edge ending at scan k (its planes exist).

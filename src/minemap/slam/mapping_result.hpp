@@ -15,6 +15,7 @@
 #include "minemap/io/formats.hpp"
 #include "minemap/registration/health.hpp"
 #include "minemap/registration/icp.hpp"
+#include "minemap/slam/pose_graph.hpp"
 
 namespace minemap {
 
@@ -49,6 +50,10 @@ struct ScanOutcome {
   std::optional<Pose> sweep_motion_cm;
   bool registered = true;                   ///< false: no registration succeeded; pose from odometry
   std::string failure;                      ///< why, when !registered
+  /// A survey tied to control (slam/control_tie.hpp): the covariance of world_from_points' right
+  /// perturbation [translation cm, rotation rad] from the adjusted pose graph, calibrated
+  /// (ControlSettings::sigma_scale). Empty otherwise.
+  std::optional<Eigen::Matrix<double, 6, 6>> covariance;
 };
 
 struct StageTimes {
@@ -65,6 +70,37 @@ struct LoopClosure {
   double gap_after_cm = 0, gap_after_deg = 0;    ///< the same after the relaxation
   /// The gap before the relaxation over the drive between (0 when there was no drive).
   double misclosure_fraction() const { return path_cm > 0.0 ? gap_before_cm / path_cm : 0.0; }
+};
+
+/// One control point after the tie (slam/control_tie.hpp).
+struct ControlResidual {
+  std::string point;
+  std::vector<std::size_t> scans;  ///< the scans observing it
+  /// Where the map puts it minus where it is known to be: east, north, height (m). For a blunder:
+  /// where the map tied to the other points puts it.
+  Eigen::Vector3d residual_m = Eigen::Vector3d::Zero();
+  /// That difference in its sigmas (the point's and the map's there: the 3D Mahalanobis distance).
+  double sigmas = 0.0;
+  double sigma_horizontal_m = 0.0, sigma_vertical_m = 0.0;  ///< the point's own, as the file gives
+  bool blunder = false;  ///< left out of the tie (ControlSettings::blunder_sigmas)
+};
+
+/// A survey tied to its control: the poses are then in the grid, less `origin_cm`.
+struct ControlTie {
+  std::string file;
+  std::optional<std::uint32_t> epsg;  ///< the grid's CRS, as the control file gives it
+  /// The grid's local origin in the survey's frame and cm (3DTK's axes for a uos survey): the map's
+  /// outputs add it, as they add a survey's own origin (io::Survey::origin_cm) without control.
+  Eigen::Vector3d origin_cm = Eigen::Vector3d::Zero();
+  std::vector<ControlResidual> residuals;  ///< one per control point observed
+  int points_used = 0;                     ///< control points in the tie (blunders left out)
+  double rms_m = 0.0;                      ///< of the points used, 3D
+  /// The map's shape as matched, moved rigidly onto the control (translation cm, rotation deg):
+  /// how far the tie moved the first scan (the frame it was mapped in).
+  double moved_first_scan_cm = 0.0, moved_first_scan_deg = 0.0;
+  /// How far the adjustment bent the map beyond that rigid move: the largest and mean move of a
+  /// scan (cm).
+  double bent_max_cm = 0.0, bent_mean_cm = 0.0;
 };
 
 /// A scan's points for the map (ScanOutcome::used_points_cm and used_intensity).
@@ -95,6 +131,11 @@ struct MappingResult {
   int step3_icp_iterations = 0;  ///< Table I: ICP iterations of the relaxation
   int relaxation_matches = 0;
   std::vector<LoopClosure> loops;  ///< every loop candidate tried (MappingSettings::loops)
+  /// ControlSettings::keep_graph: the survey's pose graph over world_from_points (cm, rad): each
+  /// scan's step from the scan before as matched, with its match's information, then the closed
+  /// loops' edges. Empty otherwise.
+  std::vector<PoseGraphEdge> graph;
+  std::optional<ControlTie> control;  ///< set by tie_to_control (slam/control_tie.hpp)
   /// Stopped on request (map_survey's stop_requested) after `scans_matched` scans (0..k-1 hold their
   /// final poses; the rest are untouched); a complete run has scans_matched == scans.size().
   bool interrupted = false;

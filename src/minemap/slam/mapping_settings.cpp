@@ -114,6 +114,7 @@ void MappingSettings::validate() const {
   loops.validate();
   motion.validate();
   recovery.validate();
+  control.validate();
   health.validate();
   if (reduction == Reduction::kVoxel && (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm))) {
     throw std::invalid_argument("the voxel size must be a finite length > 0 cm");
@@ -142,6 +143,15 @@ void MotionSettings::validate() const {
   }
   if (!(provisional_step_factor >= 1.0) || !std::isfinite(provisional_step_factor)) {
     throw std::invalid_argument("the provisional match's step factor must be finite and >= 1");
+  }
+}
+
+void ControlSettings::validate() const {
+  if (!(blunder_sigmas > 0.0) || !std::isfinite(blunder_sigmas)) {
+    throw std::invalid_argument("a control blunder's least distance must be a finite number of sigmas > 0");
+  }
+  if (!(sigma_scale > 0.0) || !std::isfinite(sigma_scale)) {
+    throw std::invalid_argument("the map's sigma scale must be a finite number > 0");
   }
 }
 

@@ -173,6 +173,25 @@ struct LoopClosureSettings {
   bool operator==(const LoopClosureSettings&) const = default;
 };
 
+/// Survey control (issue 29; slam/control_tie.hpp): the map tied to known points of the mine's grid.
+struct ControlSettings {
+  /// Hand back the survey's pose graph (MappingResult::graph: every scan's step as matched, with its
+  /// match's information, and the closed loops' edges): what a tie to control adjusts. Costs one
+  /// search a scan after the last (the steps' information); set by `--control`.
+  bool keep_graph = false;
+  /// A control point whose position, predicted by the map tied to the other points, lies farther
+  /// from its known position than this many of the difference's sigmas (the point's and the map's
+  /// together; the 3D Mahalanobis distance) is a blunder: left out, named, and its scan doubtful.
+  /// 4.0 is chi-square's 99.9 % with 3 degrees of freedom (4.03 sigmas).
+  double blunder_sigmas = 4.0;
+  /// The map's sigmas (each scan's covariance from the pose graph) times this: the step information
+  /// measures how well a match's geometry pins it, not the error it makes; the factor is calibrated
+  /// against the simulated surveys' truth (docs/benchmarks.md, "Survey control").
+  double sigma_scale = 1.0;
+  void validate() const;
+  bool operator==(const ControlSettings&) const = default;
+};
+
 /// Everything map_survey takes. MappingSettings{} is minemap's default, the whole-survey mode: each
 /// scan, reduced to 15 cm voxel means, is matched once against the metascan of the registered scans
 /// near it (10 cm voxel means), with default_icp() (25 cm, then 7.5 cm). simultaneous() is the
@@ -247,6 +266,7 @@ struct MappingSettings {
   LoopClosureSettings loops;
   MotionSettings motion;
   RecoverySettings recovery;
+  ControlSettings control;
 
   /// The default preset's ICP: the paper's schedule, then a refinement at 7.5 cm (0.3 x 25 cm),
   /// Anderson-accelerated, a phase converged when a step moves less than 1 mm and turns less than

@@ -434,9 +434,14 @@ void SurveyMatcher::finish() {
   }
   if (settings_.loops.enabled && !simultaneous) {
     control_.timed(&StageTimes::loop_closure_s, [&] {
-      std::vector<LoopClosure> closed = loop_closing_.close(state_, control_);
+      std::vector<LoopClosure> closed = loop_closing_.close(state_, control_, &graph_);
       loops_.insert(loops_.end(), closed.begin(), closed.end());
     });
+  }
+  // A tie to control adjusts the survey's graph (slam/control_tie.hpp): the chain's steps as matched
+  // (before any loop's relaxation moved them) and the loops' edges; without a loop, the chain now.
+  if (settings_.control.keep_graph && graph_.empty() && !control_.stop_requested()) {
+    control_.timed(&StageTimes::loop_closure_s, [&] { graph_ = loop_closing_.chain(state_); });
   }
   interrupted_ = false;
   scans_matched_ = n;
@@ -454,6 +459,7 @@ MappingResult SurveyMatcher::result() const {
   result.step3_icp_iterations = step3_iterations_;
   result.relaxation_matches = relaxation_matches_;
   result.loops = loops_;
+  result.graph = graph_;
   result.interrupted = interrupted_;
   result.scans_matched = scans_matched_;
   return result;

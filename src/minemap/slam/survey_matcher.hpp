@@ -123,6 +123,7 @@ class SurveyMatcher {
   std::vector<std::string> notes_;
   int step1_iterations_ = 0, step3_iterations_ = 0, relaxation_matches_ = 0;
   std::vector<LoopClosure> loops_;
+  std::vector<PoseGraphEdge> graph_;  ///< ControlSettings::keep_graph: the survey's pose graph
   bool interrupted_ = false;
   std::size_t scans_matched_ = 0;
   bool noted_unstructured_ = false;
