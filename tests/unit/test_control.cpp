@@ -209,8 +209,10 @@ TEST(ControlTie, AStraightDriveTiedToItsStationsLandsInTheGrid) {
     EXPECT_LE(mean_of(grid), mean_of(free) + 0.5);
     EXPECT_LE(2.0 * mean_of(grid, far_end), mean_of(free, far_end));
     for (const ControlResidual& r : tied.control->residuals) EXPECT_LT(r.sigmas, 1.0) << r.point;
-    // Not overconfident: the true errors inside their 95 % ellipsoids (docs: the sigmas are wide).
+    // The sigma holds: 90-99 % of the true errors inside their 95 % ellipsoids, neither
+    // overconfident nor uselessly wide (bench/control_coverage: 17 surveys).
     EXPECT_GE(coverage, 0.9);
+    EXPECT_LE(coverage, 0.99);
   }
 }
 

@@ -187,7 +187,10 @@ struct ControlSettings {
   /// The map's sigmas (each scan's covariance from the pose graph) times this: the step information
   /// measures how well a match's geometry pins it, not the error it makes; the factor is calibrated
   /// against the simulated surveys' truth (docs/benchmarks.md, "Survey control").
-  double sigma_scale = 1.0;
+  double sigma_scale = 0.65;
+  /// The map's orientation is held, weakly, where the control's Helmert put it (one scan, each axis):
+  /// control points nearly in a line leave the roll about it all but free (slam/control_tie.cpp).
+  double orientation_sigma_deg = 1.0;
   void validate() const;
   bool operator==(const ControlSettings&) const = default;
 };

@@ -251,26 +251,62 @@ PoseGraphResult optimise_pose_graph(std::vector<Pose> poses, std::span<const Pos
     result.poses = std::move(poses);
     return result;
   }
+  // Levenberg-Marquardt (PoseGraphSettings::damped): each step solves (H + lambda diag(H)) dx = -g
+  // and is kept only when it lowers the cost; lambda falls after a kept step and rises after a
+  // refused one. Plain Gauss-Newton (lambda 0, every step kept) otherwise.
+  double lambda = settings.damped ? 1e-4 : 0.0;
+  double cost = settings.damped ? result.initial_cost : 0.0;
   for (int iteration = 0; iteration < settings.max_iterations; ++iteration) {
     Eigen::SparseMatrix<double> hessian;
     Eigen::VectorXd gradient;
     graph.assemble(poses, hessian, gradient);
-    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(hessian);
-    if (solver.info() != Eigen::Success) break;
-    const Eigen::VectorXd step = solver.solve(-gradient);
-    if (solver.info() != Eigen::Success || !step.allFinite()) break;
-    double largest = 0.0;
-    for (std::size_t node = 0; node < n; ++node) {
-      if (node == fixed) continue;
-      const Vector6d dx = step.segment<6>(graph.column(node));
-      poses[node] = orthonormalised(perturbed(poses[node], dx));
-      largest = std::max({largest, dx.head<3>().norm(), 100.0 * dx.tail<3>().norm()});
-    }
-    result.iterations = iteration + 1;
-    if (largest < settings.min_update_cm) {
-      result.converged = true;
+    bool done = false;
+    for (int attempt = 0; attempt < (settings.damped ? 12 : 1); ++attempt) {
+      Eigen::SparseMatrix<double> damped = hessian;
+      if (lambda > 0.0) {
+        for (int i = 0; i < damped.rows(); ++i) damped.coeffRef(i, i) *= 1.0 + lambda;
+      }
+      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(damped);
+      if (solver.info() != Eigen::Success) {
+        done = true;
+        break;
+      }
+      const Eigen::VectorXd step = solver.solve(-gradient);
+      if (solver.info() != Eigen::Success || !step.allFinite()) {
+        done = true;
+        break;
+      }
+      std::vector<Pose> moved = poses;
+      double largest = 0.0;
+      for (std::size_t node = 0; node < n; ++node) {
+        if (node == fixed) continue;
+        const Vector6d dx = step.segment<6>(graph.column(node));
+        moved[node] = orthonormalised(perturbed(poses[node], dx));
+        largest = std::max({largest, dx.head<3>().norm(), 100.0 * dx.tail<3>().norm()});
+      }
+      if (settings.damped) {
+        const double moved_cost = graph.cost(moved);
+        if (!(moved_cost <= cost)) {  // refused: a smaller step
+          lambda *= 10.0;
+          if (largest < settings.min_update_cm) {
+            result.converged = true;
+            done = true;
+            break;
+          }
+          continue;
+        }
+        cost = moved_cost;
+        lambda = std::max(lambda / 10.0, 1e-12);
+      }
+      poses = std::move(moved);
+      result.iterations = iteration + 1;
+      if (largest < settings.min_update_cm) {
+        result.converged = true;
+        done = true;
+      }
       break;
     }
+    if (done) break;
   }
   result.final_cost = graph.cost(poses);
   if (settings.covariances) result.covariances = graph.covariances(poses, all);

@@ -62,6 +62,10 @@ struct PoseGraphSettings {
   /// Also each pose's marginal covariance at the solution (PoseGraphResult::covariances): the
   /// inverse of the normal equations' matrix, block by block (6 solves a pose).
   bool covariances = false;
+  /// Levenberg-Marquardt instead of Gauss-Newton: a step is kept only when it lowers the cost. For
+  /// graphs with a direction their terms hardly pin (a tie to control points nearly in a line), where
+  /// a Gauss-Newton step along it turns the whole graph by anything.
+  bool damped = false;
   bool operator==(const PoseGraphSettings&) const = default;
 };
 
