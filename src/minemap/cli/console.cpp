@@ -158,11 +158,11 @@ void print_loops(const MapOptions& options, const MappingResult& result) {
     const std::string& to = result.scans[loop.to].name;
     if (loop.closed && !options.quiet) {
       say(stdout,
-          "loop closed: %s with %s: %.1f cm / %.2f deg apart before the relaxation (%.2f %% of %.1f m driven), "
-          "%.1f cm / %.2f deg after\n",
+          "loop closed: %s with %s: %.1f cm / %.2f deg apart before the relaxation (%.2f %% of %.1f m driven: "
+          "%.0f ppm, %.1f mm a scan), %.1f cm / %.2f deg after\n",
           to.c_str(), from.c_str(), loop.gap_before_cm, loop.gap_before_deg,
-          100.0 * loop.misclosure_fraction(), loop.path_cm / 100.0,
-          loop.gap_after_cm, loop.gap_after_deg);
+          100.0 * loop.misclosure_fraction(), loop.path_cm / 100.0, loop.misclosure_ppm(),
+          10.0 * loop.gap_per_scan_cm(), loop.gap_after_cm, loop.gap_after_deg);
     } else if (!loop.closed && !any_closed) {
       std::fprintf(stderr,
                    "minemap: loop not closed: %s stands near %s, but no match of the two was trusted (%s): the "
@@ -178,11 +178,13 @@ void print_control(const MapOptions& options, const MappingResult& result) {
   say(stdout, "control: %d of %zu points tied (rms %.1f mm; the map bent up to %.1f cm beyond a rigid move)%s\n",
       tie.points_used, tie.residuals.size(), 1000.0 * tie.rms_m, tie.bent_max_cm,
       tie.epsg ? (", EPSG:" + std::to_string(*tie.epsg)).c_str() : "");
-  say(stdout, "  %-10s %9s %9s %9s %9s %7s\n", "point", "E mm", "N mm", "H mm", "3D mm", "sigmas");
+  say(stdout, "  closure on the control before the tie: %.0f ppm of %.1f m driven (the map as matched, moved rigidly)\n",
+      tie.closure_ppm, tie.drive_cm / 100.0);
+  say(stdout, "  %-10s %9s %9s %9s %9s %7s %12s\n", "point", "E mm", "N mm", "H mm", "3D mm", "sigmas", "before mm");
   for (const ControlResidual& r : tie.residuals) {
-    say(stdout, "  %-10s %+9.1f %+9.1f %+9.1f %9.1f %7.2f%s\n", r.point.c_str(), 1000.0 * r.residual_m.x(),
+    say(stdout, "  %-10s %+9.1f %+9.1f %+9.1f %9.1f %7.2f %12.1f%s\n", r.point.c_str(), 1000.0 * r.residual_m.x(),
         1000.0 * r.residual_m.y(), 1000.0 * r.residual_m.z(), 1000.0 * r.residual_m.norm(), r.sigmas,
-        r.blunder ? "  blunder: left out" : "");
+        1000.0 * r.before_m.norm(), r.blunder ? "  blunder: left out" : "");
   }
   double largest_cm = 0.0;
   std::size_t largest = 0;

@@ -166,6 +166,8 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                      {"gap_before_deg", loop.gap_before_deg},
                      {"path", loop.path_cm * unit_per_cm},
                      {"misclosure_percent", 100.0 * loop.misclosure_fraction()},
+                     {"misclosure_ppm", loop.misclosure_ppm()},
+                     {"gap_per_scan", loop.gap_per_scan_cm() * unit_per_cm},
                      {"gap_after", loop.gap_after_cm * unit_per_cm},
                      {"gap_after_deg", loop.gap_after_deg}});
   }
@@ -188,7 +190,8 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                            {"sigmas", r.sigmas},
                            {"sigma_horizontal_mm", 1000.0 * r.sigma_horizontal_m},
                            {"sigma_vertical_mm", 1000.0 * r.sigma_vertical_m},
-                           {"blunder", r.blunder}});
+                           {"blunder", r.blunder},
+                           {"before_tie_mm", {1000.0 * r.before_m.x(), 1000.0 * r.before_m.y(), 1000.0 * r.before_m.z()}}});
     }
     report["control"] = {{"file", tie.file},
                          {"epsg", tie.epsg ? nlohmann::json(*tie.epsg) : nlohmann::json(nullptr)},
@@ -197,6 +200,8 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                          {"origin_grid_m", {grid_m.x(), grid_m.y(), grid_m.z()}},
                          {"points_used", tie.points_used},
                          {"rms_mm", 1000.0 * tie.rms_m},
+                         {"closure_ppm", tie.closure_ppm},
+                         {"drive", tie.drive_cm * unit_per_cm},
                          {"bent_max", tie.bent_max_cm * unit_per_cm},
                          {"bent_mean", tie.bent_mean_cm * unit_per_cm},
                          {"residuals", residuals}};

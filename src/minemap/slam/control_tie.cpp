@@ -144,18 +144,28 @@ void tie_to_control(MappingResult& result, const io::ControlFile& control, bool 
   // 1. Helmert: the map as matched, moved rigidly onto the control (Horn, weighted by the sigmas).
   std::vector<Pose> poses(n);
   for (std::size_t k = 0; k < n; ++k) poses[k] = result.scans[k].world_from_points;
-  double total_weight = 0.0;
-  for (const Observed& ob : observed) total_weight += 3.0 / ob.covariance.trace();
-  PairSums sums;
-  for (const Observed& ob : observed) {
-    const double w = (3.0 / ob.covariance.trace()) * static_cast<double>(observed.size()) / total_weight;
-    const Eigen::Vector3d p = placed(poses[ob.scan], ob.in_points_cm);
-    sums.count += w;
-    sums.sum_data += w * p;
-    sums.sum_model += w * ob.known_cm;
-    sums.sum_data_model += w * p * ob.known_cm.transpose();
-  }
-  const std::optional<Pose> helmert = horn_transform(sums);
+  // Horn over the observations of the points in `use`, each weighted by its sigma.
+  const auto helmert_of = [&](const std::vector<bool>& use) {
+    double total_weight = 0.0;
+    std::size_t count = 0;
+    for (const Observed& ob : observed) {
+      if (!use[ob.point]) continue;
+      total_weight += 3.0 / ob.covariance.trace();
+      ++count;
+    }
+    PairSums sums;
+    for (const Observed& ob : observed) {
+      if (!use[ob.point]) continue;
+      const double w = (3.0 / ob.covariance.trace()) * static_cast<double>(count) / total_weight;
+      const Eigen::Vector3d p = placed(poses[ob.scan], ob.in_points_cm);
+      sums.count += w;
+      sums.sum_data += w * p;
+      sums.sum_model += w * ob.known_cm;
+      sums.sum_data_model += w * p * ob.known_cm.transpose();
+    }
+    return horn_transform(sums);
+  };
+  const std::optional<Pose> helmert = helmert_of(std::vector<bool>(control.points.size(), true));
   if (!helmert) fail(control, "the control points give no rigid transform (Horn's method failed on them)");
   std::vector<Pose> rigid(n);
   for (std::size_t k = 0; k < n; ++k) rigid[k] = orthonormalised(*helmert * poses[k]);
@@ -265,6 +275,16 @@ void tie_to_control(MappingResult& result, const io::ControlFile& control, bool 
     adjusted = adjust(used, adjusted);
   }
 
+  // The closure: where the map as matched, moved rigidly onto the points kept, put each point,
+  // before the tie bent it.
+  const Pose closing = helmert_of(used).value_or(*helmert);
+  std::set<std::size_t> closed_points;
+  for (const Observed& ob : observed) {
+    if (!closed_points.insert(ob.point).second) continue;
+    const Eigen::Vector3d before = placed(closing * poses[ob.scan], ob.in_points_cm) - ob.known_cm;
+    residuals[ob.point].before_m = axes.transpose() * before / 100.0;
+  }
+
   // The residuals of the points kept, in their own sigmas, and each scan's covariance.
   ControlTie tie;
   tie.file = control.path;
@@ -282,6 +302,21 @@ void tie_to_control(MappingResult& result, const io::ControlFile& control, bool 
     ++tie.points_used;
   }
   tie.rms_m = tie.points_used > 0 ? std::sqrt(sum_squares / tie.points_used) : 0.0;
+  {
+    std::size_t first = n, last = 0;
+    for (const Observed& ob : observed) {
+      first = std::min(first, ob.scan);
+      last = std::max(last, ob.scan);
+    }
+    for (std::size_t k = first + 1; k <= last && k < n; ++k) {
+      tie.drive_cm += (poses[k].block<3, 1>(0, 3) - poses[k - 1].block<3, 1>(0, 3)).norm();
+    }
+    double largest_m = 0.0;
+    for (const std::size_t p : points_observed) {
+      if (used[p]) largest_m = std::max(largest_m, residuals[p].before_m.norm());
+    }
+    tie.closure_ppm = tie.drive_cm > 0.0 ? 1e6 * 100.0 * largest_m / tie.drive_cm : 0.0;
+  }
   for (const std::size_t p : points_observed) tie.residuals.push_back(residuals[p]);
   std::vector<std::size_t> all(n);
   for (std::size_t k = 0; k < n; ++k) all[k] = k;

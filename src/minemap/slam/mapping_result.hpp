@@ -70,6 +70,10 @@ struct LoopClosure {
   double gap_after_cm = 0, gap_after_deg = 0;    ///< the same after the relaxation
   /// The gap before the relaxation over the drive between (0 when there was no drive).
   double misclosure_fraction() const { return path_cm > 0.0 ? gap_before_cm / path_cm : 0.0; }
+  /// The same in parts per million, as a traverse's misclosure is stated.
+  double misclosure_ppm() const { return 1e6 * misclosure_fraction(); }
+  /// The gap's share per scan of the loop: what the relaxation moved each step by, on average (cm).
+  double gap_per_scan_cm() const { return to > from ? gap_before_cm / static_cast<double>(to - from) : 0.0; }
 };
 
 /// One control point after the tie (slam/control_tie.hpp).
@@ -83,6 +87,9 @@ struct ControlResidual {
   double sigmas = 0.0;
   double sigma_horizontal_m = 0.0, sigma_vertical_m = 0.0;  ///< the point's own, as the file gives
   bool blunder = false;  ///< left out of the tie (ControlSettings::blunder_sigmas)
+  /// The closure on the control: where the map as matched, moved rigidly onto all the control
+  /// (Helmert), put the point, minus where it is (east, north, height; m): what the tie then bent.
+  Eigen::Vector3d before_m = Eigen::Vector3d::Zero();
 };
 
 /// A survey tied to its control: the poses are then in the grid, less `origin_cm`.
@@ -101,6 +108,10 @@ struct ControlTie {
   /// How far the adjustment bent the map beyond that rigid move: the largest and mean move of a
   /// scan (cm).
   double bent_max_cm = 0.0, bent_mean_cm = 0.0;
+  /// The closure on the control as a traverse states it: the largest ControlResidual::before_m
+  /// over the drive between the first and the last scan observing control (ppm; 0 with no drive).
+  double closure_ppm = 0.0;
+  double drive_cm = 0.0;  ///< that drive, along the scan positions as matched
 };
 
 /// A scan's points for the map (ScanOutcome::used_points_cm and used_intensity).
