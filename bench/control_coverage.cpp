@@ -30,6 +30,7 @@ struct Case {
   unsigned seed;
   double loop_cm, step_cm;
   int scans, stations;
+  int targets = 0;
 };
 
 constexpr Case kCases[] = {
@@ -50,6 +51,9 @@ constexpr Case kCases[] = {
     {"check", "loop 200 m, seed 2, 5 stations", 2, 20000, 400, 0, 5},
     {"check", "loop 160 m, seed 5, 4 stations", 5, 16000, 400, 0, 4},
     {"check", "dense (1 m steps), seed 2, 60 scans, 5 stations", 2, 0, 100, 60, 5},
+    {"check", "straight, seed 1, 5 targets", 1, 0, 400, 0, 0, 5},
+    {"check", "straight, seed 9, 3 stations and 4 targets", 9, 0, 400, 0, 3, 4},
+    {"check", "loop 200 m, seed 7, 6 targets", 7, 20000, 400, 0, 0, 6},
 };
 
 }  // namespace
@@ -83,8 +87,9 @@ int main(int argc, char** argv) {
     for (const Scan& scan : survey.scans) names.push_back(scan.name);
     sim::ControlSimulationSettings stations;
     stations.stations = c.stations;
+    stations.targets = c.targets;
     stations.seed = c.seed;
-    const sim::SimulatedControl control = sim::simulate_control(survey.truth_cm, names, stations);
+    const sim::SimulatedControl control = sim::simulate_control(survey.truth_cm, names, stations, settings.mine);
     tie_to_control(result, control.file, true, mapping.control, mapping.loops.graph);
     if (std::getenv("MINEMAP_DEBUG_CONTROL")) {
       for (const ControlResidual& r : result.control->residuals) {

@@ -246,6 +246,32 @@ TEST(ControlTie, ABlunderIsNamedAndLeftOut) {
   EXPECT_LT(*std::max_element(grid.begin(), grid.end()), 5.0);
 }
 
+// Targets on the ribs, each picked in one scan, tie the map as stations do (and, off the drive's
+// line, pin its roll too).
+TEST(ControlTie, TargetsOnTheRibsTieTheMapToo) {
+  const MappedDrive& drive = mapped_drive();
+  sim::ControlSimulationSettings settings;
+  settings.targets = 5;
+  sim::SimulationSettings simulation;
+  simulation.mine.seed = 1;
+  const sim::SimulatedControl control = sim::simulate_control(drive.survey.truth_cm, drive.names, settings, simulation.mine);
+  ASSERT_EQ(control.file.points.size(), 5u);
+  for (const io::ControlObservation& o : control.file.observations) {
+    EXPECT_EQ(o.kind, io::ControlObservation::Kind::kTarget);
+    EXPECT_GT(o.in_scan_cm.norm(), 100.0);  // on the rib, metres off the scanner
+  }
+  MappingResult tied = drive.result;
+  tie_to_control(tied, control.file, true, ControlSettings{}, LoopClosureSettings{}.graph);
+  const std::vector<double> grid = grid_errors(tied, drive.survey, control);
+  const std::vector<double> free = first_scan_errors(drive.result, drive.survey);
+  const std::size_t far_end = grid.size() * 9 / 10;
+  std::printf("targets: grid mean %.1f cm, far end %.1f cm (without control %.1f / %.1f)\n", mean_of(grid),
+              mean_of(grid, far_end), mean_of(free), mean_of(free, far_end));
+  EXPECT_TRUE(tied.doubtful().empty());
+  EXPECT_LE(mean_of(grid), mean_of(free) + 0.5);
+  EXPECT_LE(2.0 * mean_of(grid, far_end), mean_of(free, far_end));
+}
+
 TEST(ControlTie, RefusesTooFewPointsOrPointsInALine) {
   const MappedDrive& drive = mapped_drive();
   sim::ControlSimulationSettings settings;

@@ -92,9 +92,11 @@ int run_moving_simulate(const SimulateOptions& options, sim::MovingSensor sensor
 
 /// DIR/control.txt (sim/survey_control.hpp) and DIR/control_truth.tum: each scan's true pose in the
 /// grid (east, north, height, metres; the scanner's frame turned z up as the map's outputs are).
-void write_simulated_control(const SimulateOptions& options, const sim::SimulatedSurvey& survey) {
+void write_simulated_control(const SimulateOptions& options, const sim::SimulationSettings& simulation,
+                             const sim::SimulatedSurvey& survey) {
   sim::ControlSimulationSettings settings;
   settings.stations = options.control_stations;
+  settings.targets = options.control_targets;
   settings.blunder_m = options.control_blunder_m;
   settings.seed = options.seed;
   std::vector<std::string> names;
@@ -103,9 +105,10 @@ void write_simulated_control(const SimulateOptions& options, const sim::Simulate
     std::snprintf(name, sizeof name, "scan%03zu", k);
     names.emplace_back(name);
   }
-  const sim::SimulatedControl control = sim::simulate_control(survey.truth_cm, names, settings);
+  const sim::SimulatedControl control = sim::simulate_control(survey.truth_cm, names, settings, simulation.mine);
   std::vector<std::string> comment{
-      "minemap simulate --control " + std::to_string(settings.stations) + ": survey stations of the simulated mine",
+      "minemap simulate --control " + std::to_string(settings.stations) + " --control-targets " +
+          std::to_string(settings.targets) + ": survey stations and targets of the simulated mine",
       "grid: the mine turned " + std::to_string(settings.grid_rotation_deg) + " deg about the vertical, then shifted",
       "sigma " + std::to_string(settings.sigma_horizontal_m) + " m, drawn as noise on every coordinate"};
   if (!control.blunder.empty()) {
@@ -182,6 +185,10 @@ CLI::App* add_simulate_command(CLI::App& app, SimulateOptions& options, MapOptio
                       "evenly along the drive) in a mine grid turned and shifted like a UTM one, measured to 5 mm; "
                       "and DIR/control_truth.tum, the true poses in that grid (README, \"Survey control\")")
       ->check(CLI::NonNegativeNumber);
+  command->add_option("--control-targets", options.control_targets,
+                      "Tilting: also (or only) this many targets on the ribs (right and left in turn), each picked in one scan "
+                      "(its x y z in that scan's frame, 5 mm of noise) and known in the grid")
+      ->check(CLI::NonNegativeNumber);
   command->add_option("--control-blunder-m", options.control_blunder_m,
                       "Tilting, with --control: the middle station's coordinates this many metres off (a blunder)")
       ->check(CLI::NonNegativeNumber);
@@ -192,14 +199,16 @@ CLI::App* add_simulate_command(CLI::App& app, SimulateOptions& options, MapOptio
 }
 
 int run_simulate(const SimulateOptions& options) {
-  if (options.sensor != kTilting) {
-    return run_moving_simulate(options, parse_named(sim::kMovingSensorNames, options.sensor, "sensor"));
-  }
-  if (options.control_stations > 0 && options.control_stations < 3) {
-    throw std::invalid_argument("--control needs 3 stations at least (a tie needs 3 points not in a line)");
+  const int control_points = options.control_stations + options.control_targets;
+  if (control_points > 0 && control_points < 3) {
+    throw std::invalid_argument("--control and --control-targets: 3 points at least in all (a tie needs 3 not in a line)");
   }
   if (options.control_blunder_m > 0.0 && options.control_stations == 0) {
     throw std::invalid_argument("--control-blunder-m plants a blunder among --control's stations: give --control N");
+  }
+  if (options.sensor != kTilting) {
+    if (control_points > 0) throw std::invalid_argument("--control and --control-targets are the tilting scanner's survey's");
+    return run_moving_simulate(options, parse_named(sim::kMovingSensorNames, options.sensor, "sensor"));
   }
   if (options.speed_mps || options.rate_hz || options.beams || options.turn_deg_s || options.odometry) {
     throw std::invalid_argument(
@@ -228,7 +237,7 @@ int run_simulate(const SimulateOptions& options) {
         scans += part.size();
       });
   io::write_uos_truth(options.out, survey.truth_cm);
-  if (options.control_stations > 0) write_simulated_control(options, survey);
+  if (options.control_stations > 0 || options.control_targets > 0) write_simulated_control(options, settings, survey);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::printf("simulated %zu scans (%zu points, %.1f m driven) into %s in %.1f s\n", scans, points,
               survey.driven_distance_cm / 100.0, options.out.c_str(), seconds);

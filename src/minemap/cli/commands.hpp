@@ -65,6 +65,7 @@ struct SimulateOptions {
   bool odometry = false;
   // Tilting only: survey control (DIR/control.txt).
   int control_stations = 0;
+  int control_targets = 0;
   double control_blunder_m = 0.0;
 };
 /// `minemap simulate` (command_simulate.cpp).

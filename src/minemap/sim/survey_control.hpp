@@ -12,12 +12,18 @@
 
 #include "minemap/core/pose.hpp"
 #include "minemap/io/control.hpp"
+#include "minemap/sim/mine_simulator.hpp"
 
 namespace minemap::sim {
 
 struct ControlSimulationSettings {
   /// Stations, at scan positions evenly along the survey, the first and the last scan's included.
   int stations = 0;
+  /// Targets on the ribs (T1, T2, ...): a point of the right-hand rib (then the left, in turn), level with the scanner,
+  /// picked in the scan nearest each of this many places evenly along the survey (its coordinates
+  /// in that scan's frame, with target_sigma_m of noise) and known in the grid like a station.
+  int targets = 0;
+  double target_sigma_m = 0.005;
   /// The scanner's origin above the mark (its mount height: the mark is under it, on the floor).
   double instrument_height_m = 0.8;
   /// The control's sigma: stated in the file, and the noise drawn on each coordinate.
@@ -41,9 +47,11 @@ struct SimulatedControl {
   std::string blunder;  ///< the point made wrong, if any
 };
 
-/// Stations over the scans whose true poses (3DTK frame, cm) are `truth_cm`, named `scan_names`.
-/// Throws std::invalid_argument for fewer than 3 stations asked or more than there are scans.
+/// Stations over the scans whose true poses (3DTK frame, cm) are `truth_cm`, named `scan_names`,
+/// and targets on the ribs of the mine `mine` (the survey's: the one the scans were simulated in).
+/// Throws std::invalid_argument for fewer than 3 points in all, or more stations or targets than
+/// there are scans.
 SimulatedControl simulate_control(std::span<const Pose> truth_cm, std::span<const std::string> scan_names,
-                                  const ControlSimulationSettings& settings);
+                                  const ControlSimulationSettings& settings, const MineSettings& mine = {});
 
 }  // namespace minemap::sim
