@@ -196,11 +196,15 @@ def read_survey(path, **settings) -> Survey:
 
 
 def simulate(out, *, scans: int | None = None, seed: int | None = None, loop: float | None = None,
-             step_m: float | None = None) -> Path:
+             step_m: float | None = None, control: int | None = None, control_targets: int | None = None,
+             control_blunder_m: float | None = None) -> Path:
     """Writes the built-in simulated mine survey (uos, with truth/) into `out`, as `minemap simulate`
-    (its defaults: the whole 250 m drive, seed 1, straight, 4 m steps). Returns `out`."""
+    (its defaults: the whole 250 m drive, seed 1, straight, 4 m steps); `control` stations and
+    `control_targets` targets write out/control.txt and out/control_truth.tum. Returns `out`."""
     args = ["simulate", "--out", os.fspath(out)]
-    for name, value in (("--scans", scans), ("--seed", seed), ("--loop", loop), ("--step-m", step_m)):
+    for name, value in (("--scans", scans), ("--seed", seed), ("--loop", loop), ("--step-m", step_m),
+                        ("--control", control), ("--control-targets", control_targets),
+                        ("--control-blunder-m", control_blunder_m)):
         if value is not None:
             args += [name, str(value)]
     code = _core.run_cli(args)

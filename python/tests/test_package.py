@@ -398,3 +398,23 @@ def test_map_laz_is_z_up_whichever_frame_the_survey_was_mapped_in(small_survey, 
         # The survey's own axes: the drive runs along x, the roof is a few metres up z.
         assert np.all(np.abs(low - every.min(axis=0)) < 0.5) and np.all(np.abs(high - every.max(axis=0)) < 0.5)
     assert np.all(np.abs(boxes[0][2] - boxes[1][2]) < 0.05)
+
+
+def test_a_map_tied_to_control_is_in_the_grid(tmp_path):
+    # Survey control (issue 29): the simulator's stations in a UTM-size grid; map.laz, the poses'
+    # origin and a LAZ export all come back in grid coordinates, where the simulator put the truth.
+    survey = minemap.simulate(tmp_path / "survey", scans=16, control=3)
+    result = minemap.map_survey(survey, out=tmp_path / "out", control=survey / "control.txt", threads=2)
+    report = result.report
+    assert report["control"]["points_used"] == 3
+    origin = np.asarray(report["control"]["origin_grid_m"])
+    truth = np.loadtxt(survey / "control_truth.tum")[:, 1:4]
+    trajectory = np.loadtxt(tmp_path / "out" / "trajectory.tum")[:, 1:4] + origin
+    assert np.max(np.linalg.norm(trajectory - truth, axis=1)) < 0.10
+    laz = laspy.read(tmp_path / "out" / "map.laz")
+    xyz = np.stack([laz.x, laz.y, laz.z], axis=1)
+    assert np.all(np.abs(xyz.mean(axis=0)[:2] - truth.mean(axis=0)[:2]) < 30.0)  # the drive's scans, metres
+    summary = minemap.export(tmp_path / "out", tmp_path / "grid.laz")
+    assert summary["completed"]
+    exported = laspy.read(tmp_path / "grid.laz")
+    assert abs(float(np.mean(exported.y)) - truth[:, 1].mean()) < 30.0

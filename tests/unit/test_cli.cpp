@@ -8,6 +8,7 @@
 #include <chrono>
 #include <fstream>
 #include <sstream>
+#include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
 #include "test_support.hpp"
@@ -124,6 +125,57 @@ TEST(Cli, UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder) {
   EXPECT_TRUE(lines_containing(output, "uos files have no '# slice' markers").empty()) << output;
   std::ifstream without(dir / "without" / "report.json");
   EXPECT_FALSE(nlohmann::json::parse(without)["notes"].empty());
+}
+
+// Survey control (issue 29): the simulator's stations, one of them planted 0.5 m wrong; the map is in
+// the grid (trajectory.tum plus report.json's origin is the truth the simulator wrote), the blunder
+// is named and the run exits 13; the export is in grid coordinates; a control file naming a scan the
+// survey lacks is refused by file and line before anything is mapped or written.
+TEST(Cli, AMapTiedToControlIsInTheGridAndNamesABlunder) {
+  TempDir dir;
+  std::string output;
+  const std::string survey = (dir / "survey").string();
+  ASSERT_EQ(run_cli("simulate --out " + survey + " --scans 24 --control 4 --control-blunder-m 0.5", &output), 0)
+      << output;
+  const std::string control = (dir / "survey" / "control.txt").string();
+  EXPECT_EQ(run_cli("map " + survey + " --out " + (dir / "out").string() + " --backend cpu --control " + control,
+                    &output),
+            13)
+      << output;
+  EXPECT_NE(output.find("blunder: left out"), std::string::npos) << output;
+  EXPECT_NE(output.find("control point S3 lies"), std::string::npos) << output;
+  std::ifstream in(dir / "out" / "report.json");
+  const auto report = nlohmann::json::parse(in);
+  ASSERT_TRUE(report.contains("control"));
+  EXPECT_EQ(report["control"]["points_used"], 3);
+  EXPECT_EQ(report["control"]["epsg"], 32633);
+  for (const auto& r : report["control"]["residuals"]) EXPECT_EQ(r["blunder"].get<bool>(), r["point"] == "S3") << r;
+  EXPECT_TRUE(report["scans"][5].contains("sigma"));
+  const auto origin = report["control"]["origin_grid_m"].get<std::vector<double>>();
+  const auto first_line = [](const std::filesystem::path& path) {
+    std::ifstream file(path);
+    std::string line;
+    while (std::getline(file, line) && line.front() == '#') {}
+    std::istringstream values(line);
+    double t, x, y, z;
+    values >> t >> x >> y >> z;
+    return Eigen::Vector3d(x, y, z);
+  };
+  const Eigen::Vector3d mapped = first_line(dir / "out" / "trajectory.tum") + Eigen::Vector3d(origin[0], origin[1], origin[2]);
+  const Eigen::Vector3d truth = first_line(dir / "survey" / "control_truth.tum");
+  EXPECT_GT(truth.y(), 7e6);  // a UTM-size northing
+  EXPECT_LT((mapped - truth).norm(), 0.05) << mapped.transpose() << " / " << truth.transpose();
+  EXPECT_NE(test::read_text(dir / "out" / "map.ply").find("grid: add the origin"), std::string::npos);
+  ASSERT_EQ(run_cli("export " + (dir / "out").string() + " --to " + (dir / "grid.ply").string(), &output), 0) << output;
+  EXPECT_TRUE(std::filesystem::exists(dir / "grid.ply"));
+
+  test::write_text(dir / "bad.txt", "point S1 1 2 3 0.01\npoint S2 4 5 6 0.01\nstation scan999 S1\n");
+  EXPECT_EQ(run_cli("map " + survey + " --out " + (dir / "never").string() + " --control " + (dir / "bad.txt").string(),
+                    &output),
+            10)
+      << output;
+  EXPECT_NE(output.find("bad.txt:3:"), std::string::npos) << output;
+  EXPECT_FALSE(std::filesystem::exists(dir / "never"));
 }
 
 TEST(Cli, BadInputNamesFileAndLineAndLeavesTheOutputFolderAsItWas) {

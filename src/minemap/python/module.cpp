@@ -233,8 +233,9 @@ py::dict run_to_dict(const cli::MapCommand& command, const cli::MapRun& run, con
   d["format"] = run.survey.format;
   d["unit"] = std::string(to_string(unit));
   const double per_cm = 1.0 / centimetres_per(unit);
-  d["origin"] = py::make_tuple(run.survey.origin_cm.x() * per_cm, run.survey.origin_cm.y() * per_cm,
-                               run.survey.origin_cm.z() * per_cm);
+  // The poses' origin: a map tied to control is in the grid, less its origin (slam/control_tie.hpp).
+  const Eigen::Vector3d origin = result.control ? result.control->origin_cm : run.survey.origin_cm;
+  d["origin"] = py::make_tuple(origin.x() * per_cm, origin.y() * per_cm, origin.z() * per_cm);
   d["sources"] = [&] {
     py::list sources;
     for (std::size_t i = 0; i < result.scans.size(); ++i) sources.append(run.survey.scans[i].source_path);
