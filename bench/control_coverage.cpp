@@ -5,6 +5,7 @@
 // the mean largest sigma, the share inside, and the scale that would put 95 % inside.
 //
 //   build/bench/control_coverage [--json out/control_coverage.json] [--sigma-scale S] [--set calibration|check|all]
+//                                [--free]   (also each survey without control: sigmas relative to scan 0)
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -60,11 +61,18 @@ constexpr Case kCases[] = {
 
 int main(int argc, char** argv) {
   std::string json_path, set = "all";
+  bool free_too = false;  // --free: also the same survey without control, its sigmas held at scan 0
   double sigma_scale = ControlSettings{}.sigma_scale;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--json")) json_path = argv[i + 1];
-    else if (!std::strcmp(argv[i], "--sigma-scale")) sigma_scale = std::stod(argv[i + 1]);
-    else if (!std::strcmp(argv[i], "--set")) set = argv[i + 1];
+  for (int i = 1; i < argc; ++i) {
+    const bool value = i + 1 < argc;
+    if (!std::strcmp(argv[i], "--free")) free_too = true;
+    else if (!std::strcmp(argv[i], "--json") && value) json_path = argv[++i];
+    else if (!std::strcmp(argv[i], "--sigma-scale") && value) sigma_scale = std::stod(argv[++i]);
+    else if (!std::strcmp(argv[i], "--set") && value) set = argv[++i];
+    else {
+      std::fprintf(stderr, "usage: control_coverage [--json FILE] [--sigma-scale S] [--set calibration|check|all|NAME] [--free]\n");
+      return 2;
+    }
   }
   std::printf("| set | survey | scans | mean error cm | mean largest sigma cm | inside 95 %% | scale for 95 %% |\n");
   std::printf("|---|---|---|---|---|---|---|\n");
@@ -91,7 +99,33 @@ int main(int argc, char** argv) {
     stations.seed = c.seed;
     const sim::SimulatedControl control = sim::simulate_control(survey.truth_cm, names, stations, settings.mine);
     tie_to_control(result, control.file, true, mapping.control, mapping.loops.graph);
-    if (std::getenv("MINEMAP_DEBUG_CONTROL")) {
+    if (free_too) {
+      // Without control: the graph held at scan 0, each scan's error relative to it.
+      std::vector<Pose> poses;
+      for (const ScanOutcome& s : result.scans) poses.push_back(s.world_from_points);
+      std::vector<std::size_t> all(poses.size());
+      for (std::size_t k = 0; k < all.size(); ++k) all[k] = k;
+      MappingResult free_result = map_survey(survey.scans, mapping, cpu);
+      std::vector<Pose> free_poses;
+      for (const ScanOutcome& s : free_result.scans) free_poses.push_back(s.world_from_points);
+      const auto cov = pose_graph_covariances(free_poses, free_result.graph, {}, {}, 0, mapping.loops.graph, all);
+      std::size_t in = 0;
+      double err_sum = 0, sig_sum = 0;
+      std::vector<double> free_d2;
+      const Pose to_truth = survey.truth_cm[0] * rigid_inverse(free_result.scans[0].pose_cm);
+      for (std::size_t k = 0; k < all.size(); ++k) {
+        const Eigen::Vector3d e = (to_truth * free_result.scans[k].pose_cm).block<3, 1>(0, 3) - survey.truth_cm[k].block<3, 1>(0, 3);
+        const Eigen::Matrix3d r = to_truth.block<3, 3>(0, 0) * free_poses[k].block<3, 3>(0, 0);
+        const Eigen::Matrix3d c3 = sigma_scale * sigma_scale * r * cov[k].topLeftCorner<3, 3>() * r.transpose();
+        if (k > 0 && e.dot(c3.ldlt().solve(e)) <= 7.81) ++in;
+        if (k > 0) free_d2.push_back(e.dot(c3.ldlt().solve(e)));
+        err_sum += e.norm();
+        sig_sum += std::sqrt(c3.trace());
+      }
+      std::sort(free_d2.begin(), free_d2.end());
+      std::printf("  free: inside %.0f %% of %zu, mean error %.1f cm, mean sigma %.1f cm, scale for 95 %% %.3f\n", 100.0 * in / (all.size() - 1), all.size() - 1, err_sum / all.size(), sig_sum / all.size(), sigma_scale * std::sqrt(free_d2[free_d2.size() * 95 / 100] / 7.81));
+    }
+    if (std::getenv("MINEMAP_DEBUG_CONTROL")) {  // each point's residual
       for (const ControlResidual& r : result.control->residuals) {
         std::printf("  %s: %.1f mm, %.2f sigmas%s\n", r.point.c_str(), 1000 * r.residual_m.norm(), r.sigmas, r.blunder ? " blunder" : "");
       }

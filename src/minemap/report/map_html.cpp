@@ -433,6 +433,7 @@ constexpr std::string_view kViewerJs = R"JS(
       if (!s.registered) line(info, 'div', 'not registered (pose from odometry)' + (s.doubt ? ': ' + s.doubt : ''), 'doubt');
       else if (s.doubt) line(info, 'div', 'doubtful: ' + s.doubt, 'doubt');
       else if (s.note) line(info, 'div', s.note, 'dim');
+      if (s.sigma) line(info, 'div', 'sigma (1 sigma, tied to control): ' + s.sigma, 'dim');
       info.hidden = false;
       if (finite(s.p)) {
         selectedGeometry.attributes.position.setXYZ(0, s.p[0], s.p[1], s.p[2]);
@@ -584,6 +585,7 @@ std::string map_html(const MapHtmlInput& input, const MapHtmlSettings& settings)
                      {"registered", scan.registered},
                      {"doubt", scan.doubt},
                      {"note", scan.note}});
+    if (!scan.sigma.empty()) scans.back()["sigma"] = scan.sigma;
   }
   nlohmann::json meta = {{"format", "minemap map.html 1"},
                                {"title", settings.title},

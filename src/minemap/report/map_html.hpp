@@ -50,6 +50,8 @@ struct MapHtmlScan {
   bool registered = true;                                 ///< false: the pose is the odometry's
   std::string doubt;  ///< why the match is doubtful, or why it failed when !registered; empty: neither
   std::string note;   ///< how a trusted match got there, when not plainly ("trusted after a retry from 4 m")
+  /// A map tied to control: the scan's sigma in words ("1.2 x 0.8 x 0.3 cm, 0.02 deg"); empty: none.
+  std::string sigma;
 };
 
 struct MapHtmlInput {

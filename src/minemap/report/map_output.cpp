@@ -240,6 +240,16 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
 
 namespace {
 
+/// A scan's sigma for map.html's info box (a map tied to control), empty otherwise.
+std::string sigma_text(const ScanOutcome& scan) {
+  if (!scan.covariance) return {};
+  const ScanSigma sigma = scan_sigma(scan);
+  char text[120];
+  std::snprintf(text, sizeof text, "%.1f x %.1f x %.1f cm, %.3f deg", sigma.axes_cm.x(), sigma.axes_cm.y(),
+                sigma.axes_cm.z(), sigma.rotation_deg);
+  return text;
+}
+
 /// The map as the person-facing pictures show it: metres, right-handed, z up (MapOutputSettings).
 /// Points and positions stay in cm here (the views and map.html take cm); only the frame turns.
 /// The points are a sample when the map has more than MapOutputSettings::picture_points_max.
@@ -326,7 +336,8 @@ PersonView person_view(const MappingResult& result, const std::optional<std::vec
                                .doubt = !scan.registered         ? scan.failure
                                         : scan.health.doubtful() ? scan.health.doubt
                                                                  : "",
-                               .note = note});
+                               .note = note,
+                               .sigma = sigma_text(scan)});
   }
   if (!view.every_scan_has_intensity) std::vector<float>().swap(view.intensity);
   if (truth_cm && truth_cm->size() == result.scans.size()) {
