@@ -26,7 +26,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from . import _core, exports, formats
+from . import _core, crs, exports, formats
 from ._core import BackendError, InputError, OutputError, __version__
 from .batch import batch  # many surveys on a Dask cluster; dask is imported only when it runs
 
@@ -231,7 +231,8 @@ def _write_extra_outputs(out_dir: str, run: dict) -> None:
     origin = np.asarray(run["origin"], dtype=np.float64) * metres_per_unit
     if run["frame"] == "3dtk":  # uos, or --right-handed-to-3dtk: the survey's reader says (io::Survey::frame_3dtk)
         points, origin = _to_right_handed_z_up(points), _to_right_handed_z_up(origin[None, :])[0]
-    formats.write_laz(out / "map.laz", points, unit="m", origin=origin, scan_index=run["map_scan_index"])
+    grid = crs.wkt(run["epsg"])
+    formats.write_laz(out / "map.laz", points, unit="m", origin=origin, scan_index=run["map_scan_index"], wkt=grid)
     if run["format"] == "e57" and not run["interrupted"]:  # a partial run leaves the E57 alone
         by_file: dict[str, list[int]] = {}
         for i, source in enumerate(run["sources"]):

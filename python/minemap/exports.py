@@ -17,6 +17,9 @@ What each format keeps (every attribute the scans carry, and each point's scan):
   COPC     the same points and dimensions, organised as the octree of COPC 1.0 (see _write_copc).
   E57      one data3D per scan, world coordinates (float64) and an identity pose; intensity
            (float32, exact) and colour; pye57 writes no time, ring or return number (a warning).
+A map tied to control (report.json ``control``) is exported in its grid; LAS/LAZ and COPC carry the
+grid's CRS as an OGC WKT record where crs.py knows the EPSG code (the UTM zones of WGS 84 and ETRS89),
+and say so in a warning where it does not; E57 says so in a warning (pye57 cannot set it).
 """
 from __future__ import annotations
 
@@ -27,7 +30,7 @@ from pathlib import Path
 import laspy
 import numpy as np
 
-from . import _core, formats
+from . import _core, crs, formats
 
 BITS = _core.attribute_bits
 INTENSITY, COLOUR, TIME, RING, RETURN = (BITS[k] for k in ("intensity", "colour", "time", "ring", "return_number"))
@@ -56,6 +59,9 @@ def _las_header(scans, attributes: int) -> laspy.LasHeader:
     if attributes & RING:
         extra.append(laspy.ExtraBytesParams("ring", np.uint16, description="laser ring"))
     header.add_extra_dims(extra)
+    grid = crs.wkt(scans.epsg)
+    if grid is not None:  # a map tied to control: its grid's CRS (LAS 1.4: an OGC WKT record)
+        header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr(grid))
     return header
 
 
@@ -99,7 +105,7 @@ def _write_las(scans, path: Path, stop) -> dict:
     header = _las_header(scans, attributes)
     first = None
     done = points = 0
-    warnings = []
+    warnings = crs.left_out(scans.epsg, path)
     try:
         with formats._atomic(path, path.suffix) as tmp:
             with laspy.open(str(tmp), mode="w", header=header, do_compress=path.suffix.lower() == ".laz") as writer:
@@ -174,6 +180,7 @@ class _CopcBuild:
 
     def __init__(self, header: laspy.LasHeader, workdir: Path):
         self.header, self.workdir = header, workdir
+        self.wkt = None  # the grid's CRS (a map tied to control), for copclib's header
         self.spill = workdir / "points.bin"
         self.dtype = laspy.ScaleAwarePointRecord.zeros(0, header=header).array.dtype
         self.total = 0
@@ -275,7 +282,8 @@ class _CopcBuild:
         import copclib as copc
 
         h = self.header
-        config = copc.CopcConfigWriter(h.point_format.id, copc.Vector3(*h.scales), copc.Vector3(*h.offsets), "",
+        config = copc.CopcConfigWriter(h.point_format.id, copc.Vector3(*h.scales), copc.Vector3(*h.offsets),
+                                       self.wkt or "",
                                        _extra_bytes_vlr(h, self.workdir))
         # The header's bounds are the cube's: copclib (and readers built on it) take a node's box from
         # them, as COPC's info does from its centre and half size.
@@ -324,6 +332,7 @@ def _write_copc(scans, path: Path, stop) -> dict:
     header = _las_header(scans, attributes)
     with tempfile.TemporaryDirectory(dir=path.parent, prefix=f".{path.name}.") as work:
         build = _CopcBuild(header, Path(work))
+        build.wkt = crs.wkt(scans.epsg)
         done = build.spill_scans(scans, stop)
         if done is None:
             return _summary(0, 0, attributes, False)
@@ -334,7 +343,7 @@ def _write_copc(scans, path: Path, stop) -> dict:
         if not build.write(tmp, buckets, stop):
             return _summary(done, build.total, attributes, False)
         os.replace(tmp, path)
-    return _summary(done, build.total, attributes, True)
+    return _summary(done, build.total, attributes, True, crs.left_out(scans.epsg, path))
 
 
 # ---- E57 ------------------------------------------------------------------------------------------
@@ -347,6 +356,11 @@ def _write_e57(scans, path: Path, stop) -> dict:
     lost = attributes & (TIME | RING | RETURN)
     if lost:
         warnings.append(f"{path}: E57 (pye57) holds no {_core.describe_attributes(lost)}: left out")
+    if scans.epsg is not None:
+        # E57 keeps a CRS in its root's coordinateMetadata, but pye57 writes that field (empty) when
+        # it opens the file, and libE57 lets no field be set twice.
+        warnings.append(f"{path}: EPSG:{scans.epsg} is not written into the file (pye57 leaves its "
+                        f"coordinateMetadata empty); the coordinates are the grid's, report.json names it")
     done = points = 0
     try:
         with formats._atomic(path, ".e57") as tmp:

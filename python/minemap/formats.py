@@ -303,7 +303,7 @@ def _atomic(path: Path, suffix: str):
         raise
 
 
-def write_laz(path, points, *, unit: str, origin, scan_index=None) -> None:
+def write_laz(path, points, *, unit: str, origin, scan_index=None, wkt: str | None = None) -> None:
     """Write LAS 1.4 point format 6 (LAZ-compressed unless `path` ends in .las).
 
     points: (N,3) float64 in the local frame, file unit; origin (3,) in the file unit becomes the LAS
@@ -320,6 +320,9 @@ def write_laz(path, points, *, unit: str, origin, scan_index=None) -> None:
         raise ValueError(f"points lie beyond the int32 range of a {scale} {unit} LAS scale around origin")
     header = laspy.LasHeader(point_format=6, version="1.4")
     header.scales, header.offsets = np.full(3, scale), np.asarray(origin, np.float64)
+    if wkt is not None:  # the grid's CRS (a map tied to control): LAS 1.4's OGC WKT record
+        header.global_encoding.wkt = True
+        header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr(wkt))
     las = laspy.LasData(header, laspy.ScaleAwarePointRecord.zeros(len(pts), header=header))
     las.X, las.Y, las.Z = (counts[:, k].astype(np.int32) for k in range(3))
     if scan_index is not None:

@@ -415,6 +415,29 @@ def test_a_map_tied_to_control_is_in_the_grid(tmp_path):
     xyz = np.stack([laz.x, laz.y, laz.z], axis=1)
     assert np.all(np.abs(xyz.mean(axis=0)[:2] - truth.mean(axis=0)[:2]) < 30.0)  # the drive's scans, metres
     summary = minemap.export(tmp_path / "out", tmp_path / "grid.laz")
-    assert summary["completed"]
+    assert summary["completed"] and not summary["warnings"]
     exported = laspy.read(tmp_path / "grid.laz")
     assert abs(float(np.mean(exported.y)) - truth[:, 1].mean()) < 30.0
+
+    # The grid's CRS (EPSG:32633, WGS 84 / UTM zone 33N) in every file that can hold it.
+    def wkt_of(las):  # a VLR, or an extended one (copclib writes it there)
+        records = [v for v in list(las.header.vlrs) + list(las.evlrs or [])
+                   if isinstance(v, laspy.vlrs.known.WktCoordinateSystemVlr)]
+        return records[0].string if records else ""
+
+    for las in (exported, laspy.read(tmp_path / "out" / "map.laz")):
+        assert 'UTM zone 33N' in wkt_of(las) and 'AUTHORITY["EPSG","32633"]' in wkt_of(las)
+        assert 'PARAMETER["central_meridian",15]' in wkt_of(las)
+    assert minemap.export(tmp_path / "out", tmp_path / "grid.copc.laz")["completed"]
+    assert 'AUTHORITY["EPSG","32633"]' in wkt_of(laspy.read(tmp_path / "grid.copc.laz"))
+    e57 = minemap.export(tmp_path / "out", tmp_path / "grid.e57")
+    assert e57["completed"] and any("EPSG:32633 is not written" in w for w in e57["warnings"])
+
+
+def test_crs_wkt_for_the_utm_grids():
+    from minemap import crs
+    assert crs.wkt(32633).startswith('PROJCS["WGS 84 / UTM zone 33N"')
+    assert 'PARAMETER["false_northing",10000000]' in crs.wkt(32755)
+    assert 'PARAMETER["central_meridian",9]' in crs.wkt(25832) and "ETRS89" in crs.wkt(25832)
+    assert crs.wkt(2056) is None and crs.wkt(None) is None
+    assert "EPSG:2056" in crs.left_out(2056, "x.laz")[0] and crs.left_out(32633, "x.laz") == []

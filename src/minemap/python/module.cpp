@@ -236,6 +236,8 @@ py::dict run_to_dict(const cli::MapCommand& command, const cli::MapRun& run, con
   // The poses' origin: a map tied to control is in the grid, less its origin (slam/control_tie.hpp).
   const Eigen::Vector3d origin = result.control ? result.control->origin_cm : run.survey.origin_cm;
   d["origin"] = py::make_tuple(origin.x() * per_cm, origin.y() * per_cm, origin.z() * per_cm);
+  // The grid's EPSG code, when the map is tied to control and its file names one (map.laz's CRS).
+  d["epsg"] = result.control && result.control->epsg ? py::object(py::int_(*result.control->epsg)) : py::object(py::none());
   d["sources"] = [&] {
     py::list sources;
     for (std::size_t i = 0; i < result.scans.size(); ++i) sources.append(run.survey.scans[i].source_path);
@@ -598,6 +600,10 @@ PYBIND11_MODULE(_core, m) {
         return py::make_tuple(o.x(), o.y(), o.z());
       })
       .def_property_readonly("survey", &SurveyExport::survey)
+      .def_property_readonly("epsg", [](const SurveyExport& self) -> py::object {
+        if (const auto code = self.epsg()) return py::int_(*code);
+        return py::none();
+      })
       .def_property_readonly("skipped", &SurveyExport::skipped);
   m.attr("attribute_bits") = py::dict(py::arg("intensity") = int(kIntensity), py::arg("colour") = int(kColour),
                                       py::arg("time") = int(kTime), py::arg("ring") = int(kRing),

@@ -90,6 +90,8 @@ SurveyExport::SurveyExport(const std::filesystem::path& out_dir, ExportSettings 
     const auto origin = field(report["control"], "origin", report_path_).get<std::vector<double>>();
     if (origin.size() != 3) fail(report_path_, "holds a control origin that is not 3 numbers");
     output_origin_cm_ = Eigen::Vector3d(origin[0], origin[1], origin[2]) * cm;
+    const json& epsg = report["control"].value("epsg", json(nullptr));
+    if (epsg.is_number_unsigned()) epsg_ = epsg.get<std::uint32_t>();
   }
   const std::set<std::string> wanted(settings_.scans.begin(), settings_.scans.end());
   std::set<std::string> found;

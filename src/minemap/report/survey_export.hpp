@@ -69,6 +69,8 @@ class SurveyExport {
   /// The attributes of the first scan (a writer's columns), read without placing its points.
   std::uint8_t attributes();
   const std::string& survey() const { return survey_; }
+  /// The grid's EPSG code of a map tied to control (report.json control.epsg), when it names one.
+  std::optional<std::uint32_t> epsg() const { return epsg_; }
   /// Scans of the map left out: unregistered ones, which hold their odometry pose (unless named).
   const std::vector<std::string>& skipped() const { return skipped_; }
 
@@ -92,6 +94,7 @@ class SurveyExport {
   bool right_handed_to_3dtk_ = false;
   Eigen::Vector3d origin_cm_ = Eigen::Vector3d::Zero();         ///< the files' local frame (report "origin")
   Eigen::Vector3d output_origin_cm_ = Eigen::Vector3d::Zero();  ///< the poses' (a control tie's grid origin)
+  std::optional<std::uint32_t> epsg_;
   std::vector<Planned> plan_;
   std::vector<std::string> skipped_;
   std::size_t next_ = 0;
