@@ -88,10 +88,12 @@ void finish_run(const MapCommand& command, MapRun& run) {
     run.result.scans.resize(run.result.scans_matched);
     if (run.survey.truth_cm) run.survey.truth_cm->resize(run.result.scans_matched);
   } else if (run.control) {
+    const auto start = std::chrono::steady_clock::now();
     with_threads(command.options, [&] {
       tie_to_control(run.result, *run.control, run.survey.frame_3dtk, command.settings.control,
                      command.settings.loops.graph);
     });
+    run.result.times.control_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   run.truth = compare_with_truth(run.result, run.survey.truth_cm);
 }

@@ -85,8 +85,16 @@ void ProgressBar::operator()(std::size_t done, std::size_t total, const std::str
     phase_ = phase;
     phase_start_ = std::chrono::steady_clock::now();
     phase_first_done_ = done;
+    logged_done_ = 0;
   }
   if (!terminal_) {
+    const auto now = std::chrono::steady_clock::now();
+    const bool first = logged_done_ == 0, last = done >= total;
+    const bool hundredth = (done - logged_done_) * 100 >= total;
+    const bool while_ago = std::chrono::duration<double>(now - logged_at_).count() >= kLogEvery_s;
+    if (!first && !last && !hundredth && !while_ago) return;
+    logged_done_ = done;
+    logged_at_ = now;
     // Scan 0 is the master: matching reports scans 2..n.
     std::fprintf(stderr, "minemap: progress: %s %zu/%zu%s\n", phase.c_str(), done, total,
                  pace(done, total).c_str());  // not logged

@@ -31,6 +31,9 @@ class ProgressBar {
   ProgressBar(const ProgressBar&) = delete;
   ProgressBar& operator=(const ProgressBar&) = delete;
   /// Draws `done` of `total` in `phase`, with the pace (per second) and an ETA from the phase's start.
+  /// In a log (stderr not a terminal) a line per hundredth of the phase and at least one every
+  /// kLogEvery_s, always its first and last: a survey of 10 000 scans logs about 100 lines, one of
+  /// 100 scans a line a scan.
   void operator()(std::size_t done, std::size_t total, const std::string& phase);
   /// Ends the bar's line (before the run's own output on stdout), if one is drawn.
   void finish();
@@ -44,6 +47,9 @@ class ProgressBar {
   std::string phase_;
   std::size_t phase_first_done_ = 0;
   std::chrono::steady_clock::time_point phase_start_ = std::chrono::steady_clock::now();
+  std::size_t logged_done_ = 0;  ///< the last line logged in this phase
+  std::chrono::steady_clock::time_point logged_at_ = std::chrono::steady_clock::now();
+  static constexpr double kLogEvery_s = 10.0;
 };
 
 /// The survey read (scans, order, warnings) and the backend chosen.

@@ -225,6 +225,7 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
   std::vector<double> per_scan;
   for (const auto& s : result.scans) per_scan.push_back(s.match_s);
   report["timings_s"]["per_scan"] = per_scan;
+  if (result.control) report["timings_s"]["control"] = result.times.control_s;
   // The process's memory as each scan was matched, and its peak so far (the writing included).
   std::vector<double> resident;
   for (const auto& s : result.scans) resident.push_back(s.resident_mb);

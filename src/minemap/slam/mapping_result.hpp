@@ -58,6 +58,7 @@ struct ScanOutcome {
 
 struct StageTimes {
   double filter_s = 0, tree_build_s = 0, pairwise_s = 0, relaxation_s = 0, loop_closure_s = 0;
+  double control_s = 0;  ///< the tie to control (slam/control_tie.hpp), after the matcher
 };
 
 /// A loop the closing step found: scan `to` stands near the earlier scan `from`.
