@@ -176,6 +176,10 @@ TEST(Cli, AMapTiedToControlIsInTheGridAndNamesABlunder) {
       << output;
   EXPECT_NE(output.find("bad.txt:3:"), std::string::npos) << output;
   EXPECT_FALSE(std::filesystem::exists(dir / "never"));
+  // watch maps scans as they arrive: it refuses the tie rather than ignore it.
+  EXPECT_EQ(run_cli("watch " + survey + " --out " + (dir / "live").string() + " --control " + control, &output), 2)
+      << output;
+  EXPECT_NE(output.find("--control ties a finished survey"), std::string::npos) << output;
 }
 
 TEST(Cli, BadInputNamesFileAndLineAndLeavesTheOutputFolderAsItWas) {

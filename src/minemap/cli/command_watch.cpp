@@ -316,6 +316,11 @@ int run_watch(const MapCommand& command, const WatchOptions& watch, const std::s
     throw InputError(FileLocation{command.options.survey.string()},
                      "watch reads uos, PCD, PLY and KITTI folders; map LAS/LAZ and E57 surveys with `map`");
   }
+  if (!command.options.control.empty()) {
+    // Not silently ignored: the tie adjusts the finished survey as a whole.
+    throw std::invalid_argument("--control ties a finished survey to its control: map the folder with `minemap map "
+                                "--control` once the scans are in (watch maps them as they arrive)");
+  }
   check_output_folder(command.options.out, command.options.survey);
   return Watch(command, watch, options_text, hooks).run();
 }
