@@ -238,7 +238,9 @@ TEST(ControlTie, ABlunderIsNamedAndLeftOut) {
   EXPECT_EQ(tied.control->points_used, 5);
   for (const ControlResidual& r : tied.control->residuals) {
     EXPECT_EQ(r.blunder, r.point == "S4") << r.point;
-    if (r.blunder) EXPECT_NEAR(r.residual_m.norm(), 0.5, 0.05);
+    if (r.blunder) {
+      EXPECT_NEAR(r.residual_m.norm(), 0.5, 0.05);
+    }
   }
   ASSERT_EQ(doubtful.size(), 1u);
   EXPECT_NE(tied.scans[doubtful[0]].health.doubt.find("control point S4"), std::string::npos);

@@ -369,7 +369,7 @@ TEST(MappingSimulatedMine, AMemoryBoundGivesTheSameMapAndLetsTheCloudsGo) {
 
   auto opencl = test::opencl_backend();
   EXPECT_THROW(PartwiseMapper(settings, *opencl, {}, {}, tight), std::invalid_argument);
-  EXPECT_THROW(PartwiseMapper(settings, cpu, {}, {}, MemoryBound{.held_clouds_mb = 1}), std::invalid_argument);
+  EXPECT_THROW(PartwiseMapper(settings, cpu, {}, {}, MemoryBound{.held_clouds_mb = 1, .spill_folder = {}}), std::invalid_argument);
 }
 
 class MappingBackendsAgree : public ::testing::TestWithParam<const char*> {};
