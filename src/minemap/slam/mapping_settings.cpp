@@ -153,8 +153,8 @@ void ControlSettings::validate() const {
   if (!(sigma_scale > 0.0) || !std::isfinite(sigma_scale)) {
     throw std::invalid_argument("the map's sigma scale must be a finite number > 0");
   }
-  if (!(orientation_sigma_deg > 0.0) || !std::isfinite(orientation_sigma_deg)) {
-    throw std::invalid_argument("the control's hold on the map's orientation must be a finite sigma > 0 deg");
+  if (!(level_sigma_deg > 0.0) || !std::isfinite(level_sigma_deg)) {
+    throw std::invalid_argument("the control's level prior must be a finite sigma > 0 deg");
   }
 }
 

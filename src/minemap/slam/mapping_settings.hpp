@@ -188,9 +188,10 @@ struct ControlSettings {
   /// measures how well a match's geometry pins it, not the error it makes; the factor is calibrated
   /// against the simulated surveys' truth (docs/benchmarks.md, "Survey control").
   double sigma_scale = 0.65;
-  /// The map's orientation is held, weakly, where the control's Helmert put it (one scan, each axis):
-  /// control points nearly in a line leave the roll about it all but free (slam/control_tie.cpp).
-  double orientation_sigma_deg = 1.0;
+  /// Where the control points lie nearly in a line, the roll about it keeps the map's own vertical
+  /// (the survey frame's up stays the grid's) to this sigma (slam/control_tie.cpp): a scanner on a
+  /// mine floor stands within a few degrees of level.
+  double level_sigma_deg = 2.0;
   void validate() const;
   bool operator==(const ControlSettings&) const = default;
 };
