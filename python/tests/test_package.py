@@ -407,6 +407,7 @@ def test_a_map_tied_to_control_is_in_the_grid(tmp_path):
     result = minemap.map_survey(survey, out=tmp_path / "out", control=survey / "control.txt", threads=2)
     report = result.report
     assert report["control"]["points_used"] == 3
+    assert report["control"]["checked_for_blunders"] is False  # 3 points: a blunder could not be found
     origin = np.asarray(report["control"]["origin_grid_m"])
     truth = np.loadtxt(survey / "control_truth.tum")[:, 1:4]
     trajectory = np.loadtxt(tmp_path / "out" / "trajectory.tum")[:, 1:4] + origin

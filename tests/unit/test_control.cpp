@@ -204,6 +204,7 @@ TEST(ControlTie, AStraightDriveTiedToItsStationsLandsInTheGrid) {
     std::printf("  coverage %.2f\n", coverage);
     EXPECT_TRUE(tied.doubtful().empty());
     EXPECT_EQ(tied.control->points_used, stations);
+    EXPECT_EQ(tied.control->checked_for_blunders, stations >= 4);
     // In the grid within the map's own error plus the control's sigma, the far end at least twice
     // as close as the map placed by its first scan alone.
     EXPECT_LE(mean_of(grid), mean_of(free) + 0.5);

@@ -181,8 +181,16 @@ void print_loops(const MapOptions& options, const MappingResult& result) {
 }
 
 void print_control(const MapOptions& options, const MappingResult& result) {
-  if (!result.control || options.quiet) return;
+  if (!result.control) return;
   const ControlTie& tie = *result.control;
+  if (!tie.checked_for_blunders) {
+    // Not silently trusted: with 3 points a wrong one is met as exactly as the right ones.
+    std::fprintf(stderr,
+                 "minemap: control: only %zu points: a blunder among them cannot be found (each is checked against "
+                 "the map tied to 3 others: give 4 or more)\n",
+                 tie.residuals.size());
+  }
+  if (options.quiet) return;
   say(stdout, "control: %d of %zu points tied (rms %.1f mm; the map bent up to %.1f cm beyond a rigid move)%s\n",
       tie.points_used, tie.residuals.size(), 1000.0 * tie.rms_m, tie.bent_max_cm,
       tie.epsg ? (", EPSG:" + std::to_string(*tie.epsg)).c_str() : "");

@@ -199,6 +199,7 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                                      tie.origin_cm.z() * unit_per_cm}},
                          {"origin_grid_m", {grid_m.x(), grid_m.y(), grid_m.z()}},
                          {"points_used", tie.points_used},
+                         {"checked_for_blunders", tie.checked_for_blunders},
                          {"rms_mm", 1000.0 * tie.rms_m},
                          {"closure_ppm", tie.closure_ppm},
                          {"drive", tie.drive_cm * unit_per_cm},

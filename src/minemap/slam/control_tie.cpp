@@ -307,6 +307,7 @@ void tie_to_control(MappingResult& result, const io::ControlFile& control, bool 
   tie.file = control.path;
   tie.epsg = control.epsg;
   tie.origin_cm = origin;
+  tie.checked_for_blunders = points_observed.size() >= 4;
   double sum_squares = 0.0;
   for (const std::size_t p : points_observed) {
     if (!used[p]) continue;

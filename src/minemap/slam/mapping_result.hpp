@@ -102,6 +102,9 @@ struct ControlTie {
   Eigen::Vector3d origin_cm = Eigen::Vector3d::Zero();
   std::vector<ControlResidual> residuals;  ///< one per control point observed
   int points_used = 0;                     ///< control points in the tie (blunders left out)
+  /// Whether the points could be checked for blunders (4 or more observed: each predicted by 3
+  /// others). With 3, a wrong point bends the map unseen: the console and report.json say so.
+  bool checked_for_blunders = false;
   double rms_m = 0.0;                      ///< of the points used, 3D
   /// The map's shape as matched, moved rigidly onto the control (translation cm, rotation deg):
   /// how far the tie moved the first scan (the frame it was mapped in).
