@@ -1,10 +1,11 @@
 #!/usr/bin/python3
 """map.html in a real browser: headless Chromium opens the page from disk and must render it.
 
-Test (CTest's viewer_map_html): simulates a 6-scan survey with the built CLI, maps it, then opens
-OUT/map.html in Debian's chromium twice, off the network, with WebGL on SwiftShader (the CPU):
-  1. --dump-dom of map.html#scan=<a scan>: the title says "rendered N points" with N > 0, and the
-     info box shows that scan's name and ICP figures;
+Test (CTest's viewer_map_html): simulates a 6-scan survey with 4 control stations with the built
+CLI, maps it tied to them, then opens OUT/map.html in Debian's chromium twice, off the network,
+with WebGL on SwiftShader (the CPU):
+  1. --dump-dom of map.html#scan=<a scan>: the title says "rendered N points" with N > 0, the
+     info box shows that scan's name, ICP figures and sigma, and the sigma legend is there;
   2. --screenshot: the middle of the picture (where no panel is) shows the map: over 1 % of its
      pixels differ from the background, in several colours.
 Neither run may print a console message (the page prints none on success). A missing chromium is
@@ -134,8 +135,10 @@ def check_screenshot(path):
 def run_test(args, chromium):
     work = tempfile.mkdtemp(prefix="minemap-viewer-")
     try:
-        commands = [["simulate", "--out", f"{work}/survey", "--scans", str(args.scans)],
-                    ["map", f"{work}/survey", "--out", f"{work}/out", "--threads", "2"]]
+        # Tied to control (4 stations), so the page also shows each scan's sigma.
+        commands = [["simulate", "--out", f"{work}/survey", "--scans", str(args.scans), "--control", "4"],
+                    ["map", f"{work}/survey", "--out", f"{work}/out", "--threads", "2",
+                     "--control", f"{work}/survey/control.txt"]]
         if args.survey:
             commands = [["map", args.survey, "--out", f"{work}/out", "--threads", "2", "--accept-doubtful"]]
         for command in commands:
@@ -165,6 +168,12 @@ def run_test(args, chromium):
         info_text = re.sub(r"<[^>]+>", " ", info.group(1)) if info else ""
         if scan not in info_text or "ICP iterations" not in info_text or "rms" not in info_text:
             raise CheckFailed(f"map.html#scan={scan} shows no figures for {scan}: {info_text!r}")
+        if not args.survey:
+            sigma = re.search(r'<div id="sigma-legend"[^>]*>(.*?)</div>', dom, re.S)
+            if "tied to control" not in info_text or not sigma or "sigma 0 to" not in sigma.group(1):
+                raise CheckFailed(f"a map tied to control shows no sigma: info {info_text!r}, "
+                                  f"legend {sigma and sigma.group(1)!r}")
+            print(f"sigma: {sigma.group(1)}")
         if args.survey:
             choice = re.search(r'<label id="intensity-choice"([^>]*)>', dom)
             legend = re.search(r'<div id="legend"[^>]*>(.*?)</div>', dom, re.S)

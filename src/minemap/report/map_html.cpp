@@ -130,7 +130,8 @@ canvas { display: block; }
 point size <input id="point-size" type="range" min="1" max="6" step="1" value="2" style="width:70px;vertical-align:middle"></div>
 <div id="legend" class="dim"></div>
 <div id="colour-bar"></div><div id="colour-ends" class="dim"><span id="colour-lo"></span><span id="colour-hi"></span></div>
-<div class="dim">drag: orbit · right drag or shift+drag: pan · wheel: zoom · click a scan position (red): its match</div>
+<div id="sigma-legend" class="dim"></div>
+<div class="dim">drag: orbit · right drag or shift+drag: pan · wheel: zoom · click a scan position (a dot on the red line): its match</div>
 <div class="dim">red line: the scans' poses in order, where the sensor stood for scans in its own frame; for map segments already in world coordinates (a SLAM map's pieces) it shows each one's correction</div>
 </div>
 <div id="scale" class="box" title="at the orbit centre"><div id="scale-bar"></div><span id="scale-label"></span></div>
@@ -295,14 +296,29 @@ constexpr std::string_view kViewerJs = R"JS(
     }
     var scanAt = [], path = [];
     var markerColours = [];
+    // A map tied to control colours its trusted scans by their largest sigma, green to red over
+    // 0 .. the largest; doubtful (orange) and unregistered (grey) keep their colours.
+    var sigmaMax = 0;
+    scans.forEach(function (s) { if (s.sigma_cm > sigmaMax) sigmaMax = s.sigma_cm; });
+    function markerColour(s) {
+      if (!s.registered) return [0.6, 0.6, 0.6];
+      if (s.doubt) return [1.0, 0.6, 0.1];
+      if (!(sigmaMax > 0)) return [0.95, 0.2, 0.2];
+      var t = Math.min(Math.max((s.sigma_cm || 0) / sigmaMax, 0), 1);
+      return [0.2 + 0.75 * t, 0.8 - 0.6 * t, 0.3 - 0.1 * t];
+    }
     scans.forEach(function (s, index) {
       if (!finite(s.p)) return;
       var v = new THREE.Vector3(s.p[0], s.p[1], s.p[2]);
       scanAt.push({ index: index, at: v });
       path.push(v.x, v.y, v.z);
       box.expandByPoint(v);
-      markerColours.push.apply(markerColours, !s.registered ? [0.6, 0.6, 0.6] : s.doubt ? [1.0, 0.6, 0.1] : [0.95, 0.2, 0.2]);
+      markerColours.push.apply(markerColours, markerColour(s));
     });
+    if (sigmaMax > 0) {
+      document.getElementById('sigma-legend').textContent = 'scan positions: green to red, their largest sigma 0 to ' +
+          sigmaMax.toFixed(1) + ' cm (1 sigma, tied to control)';
+    }
     // The trajectory and the scan positions are drawn over the map (no depth test): in a tunnel
     // the ceiling would hide them.
     function overlay(object, order) {
@@ -585,7 +601,10 @@ std::string map_html(const MapHtmlInput& input, const MapHtmlSettings& settings)
                      {"registered", scan.registered},
                      {"doubt", scan.doubt},
                      {"note", scan.note}});
-    if (!scan.sigma.empty()) scans.back()["sigma"] = scan.sigma;
+    if (!scan.sigma.empty()) {
+      scans.back()["sigma"] = scan.sigma;
+      scans.back()["sigma_cm"] = scan.sigma_cm;
+    }
   }
   nlohmann::json meta = {{"format", "minemap map.html 1"},
                                {"title", settings.title},

@@ -52,6 +52,8 @@ struct MapHtmlScan {
   std::string note;   ///< how a trusted match got there, when not plainly ("trusted after a retry from 4 m")
   /// A map tied to control: the scan's sigma in words ("1.2 x 0.8 x 0.3 cm, 0.02 deg"); empty: none.
   std::string sigma;
+  /// The same scan's largest 1-sigma axis in cm (0: no sigma): the scan markers' colour.
+  double sigma_cm = 0.0;
 };
 
 struct MapHtmlInput {

@@ -339,7 +339,8 @@ PersonView person_view(const MappingResult& result, const std::optional<std::vec
                                         : scan.health.doubtful() ? scan.health.doubt
                                                                  : "",
                                .note = note,
-                               .sigma = sigma_text(scan)});
+                               .sigma = sigma_text(scan),
+                               .sigma_cm = scan.covariance ? scan_sigma(scan).axes_cm.maxCoeff() : 0.0});
   }
   if (!view.every_scan_has_intensity) std::vector<float>().swap(view.intensity);
   if (truth_cm && truth_cm->size() == result.scans.size()) {
