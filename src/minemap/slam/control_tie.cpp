@@ -28,6 +28,21 @@ struct Observed {
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();    ///< of known_cm (cm^2, survey axes)
 };
 
+/// The spread of the control points in `use` that the survey observes (each once, about their mean):
+/// its singular values (cm) say how far the points are from one line, V's first column is the line.
+Eigen::JacobiSVD<Eigen::MatrixXd> spread_of(const std::vector<Observed>& observed, const std::vector<bool>& use) {
+  std::map<std::size_t, Eigen::Vector3d> known;  // each point used, once
+  for (const Observed& ob : observed) {
+    if (use[ob.point]) known.emplace(ob.point, ob.known_cm);
+  }
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& [point, position] : known) mean += position / static_cast<double>(known.size());
+  Eigen::MatrixXd centred(static_cast<Eigen::Index>(known.size()), 3);
+  Eigen::Index row = 0;
+  for (const auto& [point, position] : known) centred.row(row++) = (position - mean).transpose();
+  return Eigen::JacobiSVD<Eigen::MatrixXd>(centred, Eigen::ComputeFullV);
+}
+
 /// The grid's axes as the survey's: survey = axes * grid.
 Eigen::Matrix3d grid_axes(bool survey_3dtk) {
   if (!survey_3dtk) return Eigen::Matrix3d::Identity();
@@ -125,20 +140,11 @@ void tie_to_control(MappingResult& result, const io::ControlFile& control, bool 
   Eigen::Vector3d origin = sum_cm / static_cast<double>(observed.size());
   for (int a = 0; a < 3; ++a) origin[a] = std::round(origin[a] / io::kLocalOriginGrid_cm) * io::kLocalOriginGrid_cm;
   for (Observed& ob : observed) ob.known_cm -= origin;
-  {
-    // Three points in a line leave the roll about it free.
-    Eigen::MatrixXd centred(static_cast<Eigen::Index>(points_observed.size()), 3);
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    std::map<std::size_t, Eigen::Vector3d> first_known;
-    for (const Observed& ob : observed) first_known.emplace(ob.point, ob.known_cm);
-    for (const auto& [point, known] : first_known) mean += known / static_cast<double>(first_known.size());
-    Eigen::Index row = 0;
-    for (const auto& [point, known] : first_known) centred.row(row++) = (known - mean).transpose();
-    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(centred);
-    if (svd.singularValues()[1] < 1.0) {  // cm: within a centimetre of one line
-      fail(control, "the " + std::to_string(first_known.size()) +
-                        " control points observed lie on one line: a tie needs 3 not in a line");
-    }
+  // Three points in a line leave the roll about it free.
+  if (spread_of(observed, std::vector<bool>(control.points.size(), true)).singularValues()[1] < 1.0) {
+    // cm: within a centimetre of one line
+    fail(control, "the " + std::to_string(points_observed.size()) +
+                      " control points observed lie on one line: a tie needs 3 not in a line");
   }
 
   // 1. Helmert: the map as matched, moved rigidly onto the control (Horn, weighted by the sigmas).
@@ -210,16 +216,7 @@ void tie_to_control(MappingResult& result, const io::ControlFile& control, bool 
     }
   }
   const auto level_of = [&](const std::vector<bool>& use, const std::vector<Pose>& at) {
-    std::map<std::size_t, Eigen::Vector3d> known;  // each point used, once
-    for (const Observed& ob : observed) {
-      if (use[ob.point]) known.emplace(ob.point, ob.known_cm);
-    }
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (const auto& [point, position] : known) mean += position / static_cast<double>(known.size());
-    Eigen::MatrixXd centred(static_cast<Eigen::Index>(known.size()), 3);
-    Eigen::Index row = 0;
-    for (const auto& [point, position] : known) centred.row(row++) = (position - mean).transpose();
-    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(centred, Eigen::ComputeFullV);
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd = spread_of(observed, use);
     const Eigen::Vector3d axis = svd.matrixV().col(0).normalized();
     // The tie's turn at the middle scan, and what brings the map's up back to the grid's about `axis`.
     const Eigen::Matrix3d turn = at[middle_scan].block<3, 3>(0, 0) * poses[middle_scan].block<3, 3>(0, 0).transpose();
