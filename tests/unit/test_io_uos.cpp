@@ -9,6 +9,8 @@
 #include <numbers>
 #include <random>
 #include <algorithm>
+#include <charconv>
+#include <cstring>
 #include <sstream>
 
 #include "io_test_helpers.hpp"
@@ -43,6 +45,51 @@ std::vector<std::string> tokens_of(const std::string& text) {
 }
 
 // ---- .3d points ---------------------------------------------------------------------------------
+
+// parse_double's fast path (Clinger's) against the oracle, std::from_chars: the same value, bit
+// for bit, and the same verdict, for every number a scan file may hold and the edges around it.
+TEST(TextNumbers, TheFastPathReadsEveryDecimalAsFromCharsDoes) {
+  const auto oracle = [](std::string_view token, double& value) {
+    if (!token.empty() && token.front() == '+') token.remove_prefix(1);
+    const auto [end, error] = std::from_chars(token.data(), token.data() + token.size(), value);
+    return error == std::errc() && end == token.data() + token.size();
+  };
+  const auto same = [&](const std::string& token) {
+    double fast = 0.0, slow = 0.0;
+    const bool ok = io::detail::parse_double(token, fast) == io::detail::NumberStatus::kOk;
+    const bool ok_oracle = oracle(token, slow) && !(token.size() > 1 && token[0] == '+' && (token[1] == '-' || token[1] == '+'));
+    ASSERT_EQ(ok, ok_oracle) << token;
+    if (ok) {
+      ASSERT_EQ(std::memcmp(&fast, &slow, sizeof fast), 0) << token << ": " << fast << " against " << slow;
+    }
+  };
+  for (const char* token : {"0", "-0", "0.0", "-0.0", "1", "-1", "192.39798", "-5.890489e-15", "1.0202626e-14", "1e22",
+                            "1e23", "9007199254740992", "9007199254740993", "9007199254740993e-5", "1234567890123456789",
+                            "12345678901234567890", "0.1", "0.3", "2.5e-22", "2.5e-23", "1E5", "1e+5", "1e-0", "5.", ".5",
+                            "-.5", "1e", "1e+", "e5", "-", "+1", "+-1", "inf", "nan", "1.5x", "1..5", "--1", "1e400",
+                            "0.000000000000000000001", "1e99999999999"}) {
+    same(token);
+  }
+  std::mt19937_64 rng(29);
+  for (int n = 0; n < 200000; ++n) {
+    std::string token = rng() % 2 ? "-" : "";
+    const int whole = static_cast<int>(rng() % 12), fraction = static_cast<int>(rng() % 14);
+    for (int k = 0; k < std::max(whole, 1); ++k) token += static_cast<char>('0' + rng() % 10);
+    if (fraction > 0) token += '.';
+    for (int k = 0; k < fraction; ++k) token += static_cast<char>('0' + rng() % 10);
+    if (rng() % 3 == 0) {
+      token += 'e';
+      token += std::to_string(static_cast<int>(rng() % 61) - 30);
+    }
+    same(token);
+  }
+  for (int n = 0; n < 100000; ++n) {  // floats printed as the writers print them (shortest round trip)
+    const double v = std::ldexp(static_cast<double>(rng() % (1u << 24)), static_cast<int>(rng() % 80) - 60);
+    char text[64];
+    std::snprintf(text, sizeof text, rng() % 2 ? "%.8g" : "%.17g", rng() % 2 ? v : -v);
+    same(text);
+  }
+}
 
 TEST(UosPoints, RoundTripIsBitExactAndKeepsSlices) {
   TempDir dir;

@@ -167,6 +167,46 @@ TEST(LocalMapCells, TheCellMustBeAFiniteLengthOrZero) {
   EXPECT_NO_THROW(settings.validate());
 }
 
+// The judging after a loop takes whole visits to a place: i's own, the first, then the nearest in
+// the drive; the scans keep the order they came in (nearest first), and a place passed at most
+// `most` times keeps every scan.
+std::vector<std::size_t> visits(const std::vector<std::size_t>& near, std::size_t i, std::size_t most) {
+  return detail::nearest_visits(near, i, near, 10, most);  // every scan near stands at the place
+}
+
+TEST(LocalMapVisits, AThirdLapIsJudgedAgainstItsOwnTheFirstAndTheNearestLap) {
+  // Scan 207 on its third lap of 100 scans; near it (nearest first) scans of four laps.
+  const std::vector<std::size_t> near = {206, 208, 6, 106, 306, 205, 209, 5, 105, 305, 7, 107, 307};
+  // Lap 4's scans (from 305) are 98 scans after 207, lap 2's (to 107) 100 before: lap 4 is kept.
+  EXPECT_EQ(visits(near, 207, 3), (std::vector<std::size_t>{206, 208, 6, 306, 205, 209, 5, 305, 7, 307}));
+  EXPECT_EQ(visits(near, 207, 2), (std::vector<std::size_t>{206, 208, 6, 205, 209, 5, 7}));
+  EXPECT_EQ(visits(near, 207, 1), (std::vector<std::size_t>{206, 208, 205, 209}));
+  EXPECT_EQ(visits(near, 207, 0), near);  // 0: all
+  EXPECT_EQ(visits(near, 207, 4), near);  // four visits: all of them
+  // Two laps as far in the drive: the earlier.
+  EXPECT_EQ(visits({103, 3, 303}, 203, 3), (std::vector<std::size_t>{103, 3}));
+  EXPECT_EQ(visits({103, 3, 303, 202}, 203, 3), (std::vector<std::size_t>{103, 3, 202}));
+  // Scan 300, just before lap 4's scans near it: they are its own visit (within the gap).
+  EXPECT_EQ(visits({305, 5, 205, 105}, 300, 2), (std::vector<std::size_t>{305, 5}));
+  // Within the gap, scans are one visit however many: a slow drive is not cut into laps.
+  EXPECT_EQ(detail::nearest_visits({1, 12, 23, 34, 45}, 50, {1, 12, 23, 34, 45}, 11, 1),
+            (std::vector<std::size_t>{1, 12, 23, 34, 45}));
+  EXPECT_TRUE(visits({}, 3, 3).empty());
+}
+
+// Scans near but not at the place (seen from afar: the other side of a small loop) go with the
+// visit nearest them in the drive.
+TEST(LocalMapVisits, AScanSeenFromAfarGoesWithTheVisitNearestItInTheDrive) {
+  const std::vector<std::size_t> near = {6, 106, 150, 206, 306, 250, 50};
+  const std::vector<std::size_t> at_place = {6, 106, 206, 306};
+  // 150 is nearer lap 2's visit (106) than 207's own (206): left out with lap 2; 250 is 207's own,
+  // 50 the first lap's.
+  EXPECT_EQ(detail::nearest_visits(near, 207, at_place, 10, 2), (std::vector<std::size_t>{6, 206, 250, 50}));
+  // Before the first visit and after the last: theirs.
+  EXPECT_EQ(detail::nearest_visits({0, 400, 106}, 207, at_place, 10, 2), (std::vector<std::size_t>{0}));
+  EXPECT_EQ(detail::nearest_visits({0, 400, 106}, 207, at_place, 10, 3), (std::vector<std::size_t>{0, 400}));
+}
+
 struct MovingRun {
   PoseErrors errors;
   std::size_t doubtful = 0;

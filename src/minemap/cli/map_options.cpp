@@ -278,6 +278,8 @@ void MapOptionTable::declare_loops(MapOptions& map, MappingSettings& mapping) {
          "Every edge keeps at least this fraction of the sigmas' information in every direction");
   number(g, "--loop-judge-max-scans", loops.judge_max_scans,
          "After the relaxation each scan is judged again against this many nearest scans (0 = all near it)");
+  number(g, "--loop-judge-max-visits", loops.judge_max_visits,
+         "...of at most this many visits to its place: its own, the first, the next nearest in the drive (0 = all)");
   number(g, "--loop-max-misclosure-fraction", loops.max_misclosure_fraction,
          "A loop that closes further apart than this fraction of its drive makes its scan doubtful (0 = never)");
   number(g, "--graph-translation-sigma-cm", loops.graph.translation_sigma_cm, "Pose graph: one edge's sigma (cm)");

@@ -80,8 +80,57 @@ void fail_at_byte(const std::string& path, std::uint64_t byte_offset, const std:
   throw InputError(FileLocation{path, 0, static_cast<std::int64_t>(byte_offset)}, message, problem);
 }
 
+namespace {
+
+/// Clinger's fast path, for the decimals scan files are made of ("192.39798", "-5.890489e-15"): the
+/// digits as an integer w <= 2^53 and a power of ten p with |p| <= 22 are both exact doubles, so
+/// w * 10^p (or w / 10^-p) is one IEEE operation, rounded once: the correctly rounded value, which
+/// is what from_chars returns too. Takes only [-]digits[.digits][(e|E)[+-]digits] of at most 19
+/// digits, the whole token; false for anything else (from_chars then reads it). Parsing is a third
+/// of reading a survey (docs/scaling.md), and from_chars' general path is the slower part of it.
+bool fast_decimal(std::string_view token, double& value) {
+  static constexpr double kPowers[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
+                                       1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+  const char* at = token.data();
+  const char* const end = at + token.size();
+  const bool negative = at != end && *at == '-';
+  if (negative) ++at;
+  std::uint64_t digits = 0;
+  int count = 0;
+  const auto digit = [](char c) { return static_cast<unsigned>(c - '0') <= 9u; };
+  const char* const whole = at;
+  for (; at != end && digit(*at); ++at, ++count) digits = digits * 10 + static_cast<unsigned>(*at - '0');
+  if (at == whole) return false;  // ".5", "-", "inf": from_chars
+  int power = 0;
+  if (at != end && *at == '.') {
+    const char* const fraction = ++at;
+    for (; at != end && digit(*at); ++at, ++count) digits = digits * 10 + static_cast<unsigned>(*at - '0');
+    if (at == fraction) return false;  // "5.": from_chars
+    power = -static_cast<int>(at - fraction);
+  }
+  if (count > 19) return false;  // digits may have overflowed
+  if (at != end && (*at == 'e' || *at == 'E')) {
+    ++at;
+    const bool down = at != end && *at == '-';
+    if (at != end && (*at == '-' || *at == '+')) ++at;
+    const char* const exponent = at;
+    int e = 0;
+    for (; at != end && digit(*at) && e < 1000; ++at) e = e * 10 + (*at - '0');
+    if (at == exponent) return false;
+    power += down ? -e : e;
+  }
+  if (at != end || digits > (std::uint64_t{1} << 53) || power < -22 || power > 22) return false;
+  const double w = static_cast<double>(digits);
+  value = power >= 0 ? w * kPowers[power] : w / kPowers[-power];
+  if (negative) value = -value;
+  return true;
+}
+
+}  // namespace
+
 NumberStatus parse_double(std::string_view token, double& value) {
   if (token.empty()) return NumberStatus::kNotANumber;
+  if (token.front() != '+' && fast_decimal(token, value)) return NumberStatus::kOk;
   // from_chars refuses a leading '+', strtod (3DTK, PCL) accepts it; "+-1" stays refused.
   if (token.front() == '+') {
     token.remove_prefix(1);

@@ -100,6 +100,43 @@ std::vector<Eigen::Vector3f> first_point_per_cell(const std::vector<std::vector<
   return points;
 }
 
+std::vector<std::size_t> nearest_visits(const std::vector<std::size_t>& near, std::size_t i,
+                                        const std::vector<std::size_t>& at_place, std::size_t gap, std::size_t most) {
+  std::vector<std::size_t> sorted = at_place;
+  sorted.push_back(i);
+  std::sort(sorted.begin(), sorted.end());
+  // The visits: runs of the scans at the place, each [first, last]; i's own is the one it falls in.
+  std::vector<std::pair<std::size_t, std::size_t>> runs;
+  std::size_t own = 0;
+  for (const std::size_t j : sorted) {
+    if (runs.empty() || j > runs.back().second + gap) runs.emplace_back(j, j);
+    runs.back().second = j;
+    if (j == i) own = runs.size() - 1;
+  }
+  if (most == 0 || runs.size() <= most) return near;
+  const auto apart = [&](std::size_t r, std::size_t j) {
+    return j < runs[r].first ? runs[r].first - j : j > runs[r].second ? j - runs[r].second : std::size_t{0};
+  };
+  std::vector<std::size_t> order(runs.size());
+  for (std::size_t r = 0; r < runs.size(); ++r) order[r] = r;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    const auto rank = [&](std::size_t r) { return r == own ? 0 : r == 0 ? 1 : 2; };
+    if (rank(a) != rank(b)) return rank(a) < rank(b);
+    return apart(a, i) < apart(b, i);
+  });
+  std::vector<bool> keep(runs.size(), false);
+  for (std::size_t k = 0; k < most; ++k) keep[order[k]] = true;
+  std::vector<std::size_t> kept;
+  for (const std::size_t j : near) {
+    // j's visit: the run nearest it in the drive (the earlier of two alike).
+    auto after = std::upper_bound(runs.begin(), runs.end(), j, [](std::size_t v, const auto& r) { return v < r.first; });
+    std::size_t run = static_cast<std::size_t>(after - runs.begin());  // the first run after j
+    if (run == runs.size() || (run > 0 && apart(run - 1, j) <= apart(run, j))) --run;
+    if (keep[run]) kept.push_back(j);
+  }
+  return kept;
+}
+
 std::shared_ptr<const PreparedCloud> LocalMap::metascan(const SurveyState& state, std::size_t i, const Pose& standing,
                                                         const Pose& frame, const Pose& at, double grow_cm,
                                                         Scope scope, double thin_cm) const {
@@ -110,8 +147,18 @@ std::shared_ptr<const PreparedCloud> LocalMap::metascan(const SurveyState& state
     const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
     std::erase_if(near, [&](std::size_t j) { return j + gap < i; });
   }
-  const std::size_t most = static_cast<std::size_t>(settings_.loops.judge_max_scans);
-  if (whole_map && most > 0 && near.size() > most) near.resize(most);  // the nearest (nearby sorts them)
+  if (whole_map) {
+    std::vector<std::size_t> at_place;  // the scans standing at i's place (a loop's candidate distance)
+    for (const std::size_t j : near) {
+      if ((state.pose(j).block<3, 1>(0, 3) - standing.block<3, 1>(0, 3)).norm() <= settings_.loops.max_distance_cm) {
+        at_place.push_back(j);
+      }
+    }
+    near = nearest_visits(near, i, at_place, static_cast<std::size_t>(settings_.loops.min_scan_gap),
+                          static_cast<std::size_t>(settings_.loops.judge_max_visits));
+    const std::size_t most = static_cast<std::size_t>(settings_.loops.judge_max_scans);
+    if (most > 0 && near.size() > most) near.resize(most);  // the nearest (nearby sorts them)
+  }
   return union_of(state, i, near, frame, at, grow_cm, thin_cm);
 }
 

@@ -29,11 +29,23 @@ std::vector<Eigen::Vector3f> concatenated(const std::vector<std::vector<Eigen::V
 std::vector<Eigen::Vector3f> first_point_per_cell(const std::vector<std::vector<Eigen::Vector3f>>& parts,
                                                   double cell_cm);
 
+/// Of the scans `near` scan i (in the order given), those of at most `most` visits to its place
+/// (0: all). A visit is a run of the scans `at_place` (those of `near` standing at i's place) whose
+/// indices lie within `gap` of the next: the drive passing there once (i belongs to the run it
+/// falls in); every scan of `near` belongs to the visit nearest it in the drive (the earlier of two
+/// alike), so a visit keeps what the drive saw of the place from afar too. Kept first: i's own
+/// visit, then the earliest, then the others nearest to i in the drive. A place passed at most
+/// `most` times keeps every scan; one passed lap after lap keeps whole laps, not the same few metres
+/// of each (LoopClosureSettings::judge_max_visits).
+std::vector<std::size_t> nearest_visits(const std::vector<std::size_t>& near, std::size_t i,
+                                        const std::vector<std::size_t>& at_place, std::size_t gap, std::size_t most);
+
 class LocalMap {
  public:
   /// Which scans a metascan takes: the registered ones before the scan (while matching; with loops
   /// on, only the last loops.min_scan_gap, so a loop is the pose graph's to close), or the scans
-  /// near it, earlier or later, the nearest loops.judge_max_scans (judging the finished map).
+  /// near it, earlier or later, of loops.judge_max_visits visits, the nearest loops.judge_max_scans
+  /// (judging the finished map).
   enum class Scope { kEarlier, kWholeMap };
 
   LocalMap(const MappingSettings& settings, ComputeBackend& backend) : settings_(settings), backend_(backend) {}

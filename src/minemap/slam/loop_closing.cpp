@@ -22,9 +22,10 @@ bool LoopClosing::geometric(const SurveyState& state, std::size_t k) const {
   return settings_.loops.information_from_geometry && state.prepared(k).planes.has_value();
 }
 
-std::vector<PoseGraphEdge> LoopClosing::chain(SurveyState& state) const {
+std::vector<PoseGraphEdge> LoopClosing::chain(SurveyState& state, const RunControl* control) const {
   std::vector<PoseGraphEdge> edges;
   for (std::size_t k = 1; k < state.size(); ++k) {
+    if (control) control->report(k + 1, "pose graph");
     // A scan left at odometry constrains its neighbours only weakly.
     const bool matched = state.registered(k) && state.registered(k - 1);
     edges.push_back({k - 1, k, rigid_inverse(state.pose(k - 1)) * state.pose(k), matched ? 1.0 : 0.01});
@@ -139,10 +140,11 @@ void LoopClosing::doubt_unclosed_return(SurveyState& state, const LoopClosure& l
 
 void LoopClosing::judge_again(SurveyState& state, const RunControl& control) const {
   // The relaxation moved every scan: each is judged again where it ended, against the map of the
-  // scans nearest it (loops.judge_max_scans). A scan that looked doubtful against a few recent scans
-  // (a corner that sees where the drive began) is then judged against the start too.
+  // scans near it (loops.judge_max_visits, judge_max_scans). A scan that looked doubtful against a
+  // few recent scans (a corner that sees where the drive began) is then judged against the start too.
   const double grow_cm = double(registration_.icp().max_pair_dist_cm);
   for (std::size_t k = 1; k < state.size() && !control.stop_requested(); ++k) {
+    control.report(k + 1, "judging");
     const RegistrationHealth& old = state.health(k);
     if (!state.registered(k) || !old.judged || old.out_of_reach) continue;
     const Pose& pose = state.pose(k);
@@ -205,7 +207,7 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
   }
   // The chain only now that a loop closed: its information pairs every scan with the one before
   // (each model's kd-tree built for it), the state unchanged by the loop matches (they place nothing).
-  std::vector<PoseGraphEdge> edges = chain(state);
+  std::vector<PoseGraphEdge> edges = chain(state, &control);
   const std::size_t chain_edges = edges.size();
   edges.insert(edges.end(), loop_edges.begin(), loop_edges.end());
   const PoseGraphResult relaxed = optimise_pose_graph(poses, edges, 0, settings_.loops.graph);

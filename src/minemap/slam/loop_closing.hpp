@@ -38,8 +38,9 @@ class LoopClosing {
   std::vector<LoopClosure> close(SurveyState& state, const RunControl& control,
                                  std::vector<PoseGraphEdge>* graph = nullptr) const;
   /// The chain of scan-to-scan steps as the scans stand, each with its match's information: the
-  /// pose graph's first edges (and the whole graph of a survey with no loop).
-  std::vector<PoseGraphEdge> chain(SurveyState& state) const;
+  /// pose graph's first edges (and the whole graph of a survey with no loop). `control`: where its
+  /// progress goes ("pose graph").
+  std::vector<PoseGraphEdge> chain(SurveyState& state, const RunControl* control = nullptr) const;
 
  private:
   struct Candidate {

@@ -168,6 +168,12 @@ struct LoopClosureSettings {
   /// does, and judge more harshly (docs/scaling.md: 10 laps, 1000 scans, 384 s -> 39 s at 32, and
   /// one scan called doubtful that all the laps pass). So all, by default.
   int judge_max_scans = 0;
+  /// ... and of at most this many visits to its place (0: all; a visit is a run of scans within
+  /// min_scan_gap of each other, slam/local_map.hpp nearest_visits): the scan's own, the first, and
+  /// the next nearest in the drive. Whole visits cover the tunnel the scan sees, and the first is
+  /// what a loop closed to; a tenth lap is not judged against the nine before it (docs/scaling.md:
+  /// 10 laps, 1000 scans). Places passed at most this often are judged against every scan near.
+  int judge_max_visits = 3;
   PoseGraphSettings graph;
   void validate() const;
   bool operator==(const LoopClosureSettings&) const = default;
