@@ -711,6 +711,11 @@ Survey read_in_parts(const fs::path& dir, const SurveyReadSettings& settings, st
     const std::size_t count = std::min(part_scans, total - first);
     std::vector<Scan> part = native ? read_native_part(dir, *plan, settings, first, count, tally)
                                     : std::move(foreign.scans);
+    if (native) {  // the next part's files come from the disk while this part is matched
+      for (std::size_t k = first + count; k < std::min(total, first + count + part_scans); ++k) {
+        detail::prefetch_file(plan->paths[k]);
+      }
+    }
     if (initial) {
       for (std::size_t k = 0; k < part.size(); ++k) part[k].pose_cm = (*initial)[first + k];
     }

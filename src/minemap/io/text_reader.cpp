@@ -68,6 +68,13 @@ void read_file_bytes_into(const std::filesystem::path& path, std::string& bytes)
   }
 }
 
+void prefetch_file(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return;
+  ::posix_fadvise(fd, 0, 0, POSIX_FADV_WILLNEED);
+  ::close(fd);
+}
+
 void fail_in_file(const std::string& path, const std::string& message, InputProblem problem) {
   throw InputError(FileLocation{path}, message, problem);
 }

@@ -23,6 +23,12 @@ std::string read_file_bytes(const std::filesystem::path& path);
 /// The same into `bytes`, replacing its contents and keeping its capacity.
 void read_file_bytes_into(const std::filesystem::path& path, std::string& bytes);
 
+/// Asks the kernel to start reading `path` into the page cache now (POSIX_FADV_WILLNEED) and returns
+/// at once: a survey read in parts asks for the next part's files before the current part is
+/// matched, so the disk works while the cores do. Best effort: any failure is ignored (the read
+/// that follows reports it).
+void prefetch_file(const std::filesystem::path& path);
+
 /// A scan file's bytes in a buffer that the calling thread reuses from scan to scan. A survey is
 /// read one scan per task; a fresh buffer per scan costs an allocation and the first touch of every
 /// page, which is what kept reading from scaling across cores (docs/benchmarks.md). Holds the

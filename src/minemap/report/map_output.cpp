@@ -227,6 +227,12 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
   for (const auto& s : result.scans) per_scan.push_back(s.match_s);
   report["timings_s"]["per_scan"] = per_scan;
   if (result.control) report["timings_s"]["control"] = result.times.control_s;
+  if (result.times.loop_closure_s > 0.0) {
+    report["timings_s"]["loop_closure_parts"] = {{"matches", result.times.loop_matches_s},
+                                                 {"pose_graph_steps", result.times.loop_graph_steps_s},
+                                                 {"solve", result.times.loop_solve_s},
+                                                 {"judging", result.times.loop_judging_s}};
+  }
   // The process's memory as each scan was matched, and its peak so far (the writing included).
   std::vector<double> resident;
   for (const auto& s : result.scans) resident.push_back(s.resident_mb);

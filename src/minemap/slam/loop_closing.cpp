@@ -161,7 +161,7 @@ void LoopClosing::judge_again(SurveyState& state, const RunControl& control) con
   }
 }
 
-std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl& control,
+std::vector<LoopClosure> LoopClosing::close(SurveyState& state, RunControl& control,
                                             std::vector<PoseGraphEdge>* graph) const {
   std::vector<LoopClosure> loops;
   const std::size_t n = state.size();
@@ -171,6 +171,7 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
   const std::vector<double> driven = driven_cm(state);  // as the chain left the scans
   std::vector<PoseGraphEdge> loop_edges;  // the loops' edges; the chain's come first in the graph
   std::vector<LoopClosure> unclosed_returns;  // the first converged, untrusted candidate of each
+  const RunControl::Stopwatch matching;
   for (const std::vector<Candidate>& candidates : returns(state)) {
     std::optional<LoopClosure> unclosed;
     for (const Candidate& candidate : candidates) {
@@ -199,6 +200,7 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
     }
     if (unclosed && !loops.back().closed) unclosed_returns.push_back(*unclosed);
   }
+  control.times().loop_matches_s += matching.seconds();
   // After the relaxation (if any) and its judging: a return whose matches converged but none was
   // trusted leaves its drift in the map, and the run says so.
   if (loop_edges.empty()) {
@@ -207,13 +209,15 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, const RunControl
   }
   // The chain only now that a loop closed: its information pairs every scan with the one before
   // (each model's kd-tree built for it), the state unchanged by the loop matches (they place nothing).
-  std::vector<PoseGraphEdge> edges = chain(state, &control);
+  std::vector<PoseGraphEdge> edges = control.timed(&StageTimes::loop_graph_steps_s, [&] { return chain(state, &control); });
   const std::size_t chain_edges = edges.size();
   edges.insert(edges.end(), loop_edges.begin(), loop_edges.end());
-  const PoseGraphResult relaxed = optimise_pose_graph(poses, edges, 0, settings_.loops.graph);
+  const PoseGraphResult relaxed = control.timed(&StageTimes::loop_solve_s, [&] {
+    return optimise_pose_graph(poses, edges, 0, settings_.loops.graph);
+  });
   if (graph) *graph = edges;
   for (std::size_t k = 1; k < n; ++k) state.place(k, relaxed.poses[k]);
-  judge_again(state, control);
+  control.timed(&StageTimes::loop_judging_s, [&] { judge_again(state, control); });
   std::size_t edge = chain_edges;
   for (LoopClosure& loop : loops) {
     if (!loop.closed) continue;

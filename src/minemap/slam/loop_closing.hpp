@@ -33,9 +33,10 @@ class LoopClosing {
       : settings_(settings), backend_(backend), registration_(registration), local_map_(local_map) {}
 
   /// Every loop candidate tried (closed or not); the scans it moved are placed in `state`. A stop
-  /// request ends it early with what it tried by then. `graph` (when given) receives the pose graph
+  /// request ends it early with what it tried by then. Its parts' times go to control.times()
+  /// (StageTimes::loop_matches_s ...). `graph` (when given) receives the pose graph
   /// the relaxation solved, the chain as matched and the loops' edges; empty when no loop closed.
-  std::vector<LoopClosure> close(SurveyState& state, const RunControl& control,
+  std::vector<LoopClosure> close(SurveyState& state, RunControl& control,
                                  std::vector<PoseGraphEdge>* graph = nullptr) const;
   /// The chain of scan-to-scan steps as the scans stand, each with its match's information: the
   /// pose graph's first edges (and the whole graph of a survey with no loop). `control`: where its

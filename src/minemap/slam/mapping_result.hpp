@@ -59,6 +59,9 @@ struct ScanOutcome {
 struct StageTimes {
   double filter_s = 0, tree_build_s = 0, pairwise_s = 0, relaxation_s = 0, loop_closure_s = 0;
   double control_s = 0;  ///< the tie to control (slam/control_tie.hpp), after the matcher
+  /// loop_closure_s's parts: the loop matches, the steps' information for the pose graph, its
+  /// solve, the judging after it (slam/loop_closing.hpp).
+  double loop_matches_s = 0, loop_graph_steps_s = 0, loop_solve_s = 0, loop_judging_s = 0;
 };
 
 /// A loop the closing step found: scan `to` stands near the earlier scan `from`.

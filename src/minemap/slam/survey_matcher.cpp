@@ -441,7 +441,9 @@ void SurveyMatcher::finish() {
   // A tie to control adjusts the survey's graph (slam/control_tie.hpp): the chain's steps as matched
   // (before any loop's relaxation moved them) and the loops' edges; without a loop, the chain now.
   if (settings_.control.keep_graph && graph_.empty() && !control_.stop_requested()) {
-    control_.timed(&StageTimes::loop_closure_s, [&] { graph_ = loop_closing_.chain(state_, &control_); });
+    control_.timed(&StageTimes::loop_closure_s, [&] {
+      graph_ = control_.timed(&StageTimes::loop_graph_steps_s, [&] { return loop_closing_.chain(state_, &control_); });
+    });
   }
   interrupted_ = false;
   scans_matched_ = n;
