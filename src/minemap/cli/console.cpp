@@ -161,6 +161,9 @@ void print_loops(const MapOptions& options, const MappingResult& result) {
   // cross-cut sees little of the start); only a survey whose candidates all failed is told so.
   const bool any_closed =
       std::any_of(result.loops.begin(), result.loops.end(), [](const LoopClosure& loop) { return loop.closed; });
+  // A return tries every scan near the start, closest first: the first few say why, the rest count.
+  constexpr std::size_t kUnclosedShown = 3;
+  std::size_t unclosed = 0;
   for (const LoopClosure& loop : result.loops) {
     const std::string& from = result.scans[loop.from].name;
     const std::string& to = result.scans[loop.to].name;
@@ -171,12 +174,16 @@ void print_loops(const MapOptions& options, const MappingResult& result) {
           to.c_str(), from.c_str(), loop.gap_before_cm, loop.gap_before_deg,
           100.0 * loop.misclosure_fraction(), loop.path_cm / 100.0, loop.misclosure_ppm(),
           10.0 * loop.gap_per_scan_cm(), loop.gap_after_cm, loop.gap_after_deg);
-    } else if (!loop.closed && !any_closed) {
+    } else if (!loop.closed && !any_closed && ++unclosed <= kUnclosedShown) {
       std::fprintf(stderr,
                    "minemap: loop not closed: %s stands near %s, but no match of the two was trusted (%s): the "
                    "drift over the loop stays in the map\n",
                    to.c_str(), from.c_str(), loop.doubt.c_str());
     }
+  }
+  if (unclosed > kUnclosedShown) {
+    std::fprintf(stderr, "minemap: loop not closed: and %zu more candidates, none trusted (report.json loop_closures)\n",
+                 unclosed - kUnclosedShown);
   }
 }
 
