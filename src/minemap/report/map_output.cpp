@@ -248,10 +248,8 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
 
 namespace {
 
-/// A scan's sigma for map.html's info box (a map tied to control), empty otherwise.
-std::string sigma_text(const ScanOutcome& scan) {
-  if (!scan.covariance) return {};
-  const ScanSigma sigma = scan_sigma(scan);
+/// A tied scan's sigma in words, for map.html's info box.
+std::string sigma_text(const ScanSigma& sigma) {
   char text[120];
   std::snprintf(text, sizeof text, "%.1f x %.1f x %.1f cm, %.3f deg", sigma.axes_cm.x(), sigma.axes_cm.y(),
                 sigma.axes_cm.z(), sigma.rotation_deg);
@@ -335,6 +333,8 @@ PersonView person_view(const MappingResult& result, const std::optional<std::vec
                     double(scan.health.retry_bound_cm), double(scan.health.pair_bound_cm));
       note = text;
     }
+    const bool tied = scan.covariance.has_value();  // a map tied to control: the scan's sigma
+    const ScanSigma sigma = tied ? scan_sigma(scan) : ScanSigma{};
     view.html_scans.push_back({.name = scan.name,
                                .position_cm = view.positions_cm.back(),
                                .iterations = scan.last_match.iterations(),
@@ -345,8 +345,8 @@ PersonView person_view(const MappingResult& result, const std::optional<std::vec
                                         : scan.health.doubtful() ? scan.health.doubt
                                                                  : "",
                                .note = note,
-                               .sigma = sigma_text(scan),
-                               .sigma_cm = scan.covariance ? scan_sigma(scan).axes_cm.maxCoeff() : 0.0});
+                               .sigma = tied ? sigma_text(sigma) : "",
+                               .sigma_cm = tied ? sigma.axes_cm.maxCoeff() : 0.0});
   }
   if (!view.every_scan_has_intensity) std::vector<float>().swap(view.intensity);
   if (truth_cm && truth_cm->size() == result.scans.size()) {

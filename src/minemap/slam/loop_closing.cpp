@@ -22,10 +22,10 @@ bool LoopClosing::geometric(const SurveyState& state, std::size_t k) const {
   return settings_.loops.information_from_geometry && state.prepared(k).planes.has_value();
 }
 
-std::vector<PoseGraphEdge> LoopClosing::chain(SurveyState& state, const RunControl* control) const {
+std::vector<PoseGraphEdge> LoopClosing::chain(SurveyState& state, const RunControl& control) const {
   std::vector<PoseGraphEdge> edges;
   for (std::size_t k = 1; k < state.size(); ++k) {
-    if (control) control->report(k + 1, "pose graph");
+    control.report(k + 1, "pose graph");
     // A scan left at odometry constrains its neighbours only weakly.
     const bool matched = state.registered(k) && state.registered(k - 1);
     edges.push_back({k - 1, k, rigid_inverse(state.pose(k - 1)) * state.pose(k), matched ? 1.0 : 0.01});
@@ -209,7 +209,7 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, RunControl& cont
   }
   // The chain only now that a loop closed: its information pairs every scan with the one before
   // (each model's kd-tree built for it), the state unchanged by the loop matches (they place nothing).
-  std::vector<PoseGraphEdge> edges = control.timed(&StageTimes::loop_graph_steps_s, [&] { return chain(state, &control); });
+  std::vector<PoseGraphEdge> edges = control.timed(&StageTimes::loop_graph_steps_s, [&] { return chain(state, control); });
   const std::size_t chain_edges = edges.size();
   edges.insert(edges.end(), loop_edges.begin(), loop_edges.end());
   const PoseGraphResult relaxed = control.timed(&StageTimes::loop_solve_s, [&] {

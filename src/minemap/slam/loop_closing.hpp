@@ -41,7 +41,7 @@ class LoopClosing {
   /// The chain of scan-to-scan steps as the scans stand, each with its match's information: the
   /// pose graph's first edges (and the whole graph of a survey with no loop). `control`: where its
   /// progress goes ("pose graph").
-  std::vector<PoseGraphEdge> chain(SurveyState& state, const RunControl* control = nullptr) const;
+  std::vector<PoseGraphEdge> chain(SurveyState& state, const RunControl& control) const;
 
  private:
   struct Candidate {

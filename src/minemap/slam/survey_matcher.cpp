@@ -442,7 +442,7 @@ void SurveyMatcher::finish() {
   // (before any loop's relaxation moved them) and the loops' edges; without a loop, the chain now.
   if (settings_.control.keep_graph && graph_.empty() && !control_.stop_requested()) {
     control_.timed(&StageTimes::loop_closure_s, [&] {
-      graph_ = control_.timed(&StageTimes::loop_graph_steps_s, [&] { return loop_closing_.chain(state_, &control_); });
+      graph_ = control_.timed(&StageTimes::loop_graph_steps_s, [&] { return loop_closing_.chain(state_, control_); });
     });
   }
   interrupted_ = false;
