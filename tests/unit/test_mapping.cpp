@@ -12,6 +12,7 @@
 #include "minemap/sim/mine_simulator.hpp"
 #include "minemap/sim/moving_lidar.hpp"
 #include "minemap/slam/survey_matching.hpp"
+#include "minemap/slam/survey_state.hpp"
 #include "test_support.hpp"
 
 namespace minemap {
@@ -370,6 +371,42 @@ TEST(MappingSimulatedMine, AMemoryBoundGivesTheSameMapAndLetsTheCloudsGo) {
   auto opencl = test::opencl_backend();
   EXPECT_THROW(PartwiseMapper(settings, *opencl, {}, {}, tight), std::invalid_argument);
   EXPECT_THROW(PartwiseMapper(settings, cpu, {}, {}, MemoryBound{.held_clouds_mb = 1, .spill_folder = {}}), std::invalid_argument);
+}
+
+// A metascan's union reads the model points of a scan let go of straight from the spill (the
+// judging after a loop takes hundreds a scan): the points the scan held, for a scan whose model is
+// its data cloud and for one with a model of its own, held or not.
+TEST(MappingSimulatedMine, AScanLetGoOfGivesTheModelPointsItHeld) {
+  CpuBackend cpu;
+  const MappingSettings settings;
+  const test::TempDir folder;
+  detail::SurveyState state;
+  state.bound_memory(std::make_shared<detail::ScanSpill>(folder.path(), settings, cpu), 0);
+  const auto points = [](int n, float at) {
+    std::vector<Eigen::Vector3f> cloud;
+    for (int k = 0; k < n; ++k) cloud.emplace_back(at + float(k), 2.0f * float(k), -0.5f * float(k));
+    return cloud;
+  };
+  std::vector<std::vector<Eigen::Vector3f>> models;
+  for (int i = 0; i < 3; ++i) {
+    Scan scan;
+    scan.name = "scan" + std::to_string(i);
+    detail::PreparedScan prepared;
+    prepared.cloud = cpu.prepare(points(50 + i, 100.0f * float(i)), settings.tree);
+    prepared.model_cloud = i == 1 ? prepared.cloud : cpu.prepare(points(70 + i, -7.0f * float(i)), settings.tree);
+    prepared.probe = prepared.cloud;
+    models.push_back(prepared.model_cloud->point_vector());
+    state.add(scan, std::move(prepared));
+  }
+  const auto model_of = [&](std::size_t i) {
+    const detail::ModelPoints model = state.model_points(i);
+    return std::vector<Eigen::Vector3f>(model.points().begin(), model.points().end());
+  };
+  for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(model_of(i), models[i]) << "held, scan " << i;
+  state.release_over_budget();  // a bound of 0: all but the newest let go of
+  ASSERT_GT(state.spilled_bytes(), 0u);
+  for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(model_of(i), models[i]) << "let go of, scan " << i;
+  EXPECT_EQ(state.prepared(0).model_cloud->point_vector(), models[0]);  // and taken back, the same
 }
 
 class MappingBackendsAgree : public ::testing::TestWithParam<const char*> {};

@@ -176,7 +176,8 @@ std::shared_ptr<const PreparedCloud> LocalMap::union_of(const SurveyState& state
     const Pose to_frame = frame_inverse * state.pose(near[k]);
     const Eigen::Matrix3d rotation = to_frame.block<3, 3>(0, 0);
     const Eigen::Vector3d translation = to_frame.block<3, 1>(0, 3);
-    for (const Eigen::Vector3f& p : state.prepared(near[k]).model_cloud->points()) {
+    const ModelPoints model = state.model_points(near[k]);  // a scan let go of is read, not taken back
+    for (const Eigen::Vector3f& p : model.points()) {
       const Eigen::Vector3d q = rotation * p.cast<double>() + translation;
       if ((q.array() < reach_min.array()).any() || (q.array() > reach_max.array()).any()) continue;
       parts[k].push_back(q.cast<float>());

@@ -122,6 +122,13 @@ std::shared_ptr<const std::vector<float>> ScanSpill::read_intensity(const Entry&
   return std::make_shared<const std::vector<float>>(std::move(intensity));
 }
 
+std::vector<Eigen::Vector3f> ScanSpill::model_points_of(std::size_t i) const {
+  const std::optional<Entry> e = find(i);
+  if (!e) throw std::logic_error("scan " + std::to_string(i) + " was never spilled");
+  if (!e->own_model) return read_points(e->offset, e->data);
+  return read_points(e->offset + e->data * sizeof(Eigen::Vector3f), e->model);
+}
+
 MapPoints ScanSpill::points_of(std::size_t i) const {
   const std::optional<Entry> e = find(i);
   if (!e) return {};

@@ -10,7 +10,7 @@
 // The file is opened in the folder it is given and unlinked at once (POSIX): nothing is left behind,
 // even by a crash, and the disk space returns when the last holder lets go of the spill.
 //
-// Thread-safety: store() from one thread; load() and points_of() from any (pread, no shared
+// Thread-safety: store() from one thread; load(), points_of() and model_points_of() from any (pread, no shared
 // position), also while store() runs. Reading builds clouds on the backend: the CPU backend's
 // prepare is reentrant; no other backend is handed one (PartwiseMapper maps on the CPU only).
 #include <cstdint>
@@ -43,6 +43,9 @@ class ScanSpill final : public SpilledPoints {
   PreparedScan load(std::size_t i, const PreparedScan& small) const;
   /// Scan i's map points (SpilledPoints): its data points and intensities, in the points frame.
   MapPoints points_of(std::size_t i) const override;
+  /// Scan i's model points as stored (its data points where it had no model of its own), read
+  /// without rebuilding anything: what a metascan's union takes from a scan it does not hold.
+  std::vector<Eigen::Vector3f> model_points_of(std::size_t i) const;
   /// Bytes written so far (every version of every scan).
   std::uint64_t bytes() const { return end_; }
 

@@ -59,6 +59,21 @@ const PreparedScan& SurveyState::prepared(std::size_t i) const {
   return state.prepared;
 }
 
+ModelPoints SurveyState::model_points(std::size_t i) const {
+  const ScanState& state = scans_[i];
+  if (!spill_) return ModelPoints(state.prepared.model_cloud);
+  {
+    const std::lock_guard lock(spill_mutex_);
+    if (!state.let_go) {
+      state.last_use = ++clock_;
+      return ModelPoints(state.prepared.model_cloud);
+    }
+  }
+  // Let go of: its latest entry is in the spill (a scan prepared again is held until let go again),
+  // and pread needs no lock.
+  return ModelPoints(spill_->model_points_of(i));
+}
+
 void SurveyState::let_go(std::size_t i) {
   ScanState& state = scans_[i];
   if (!state.stored) spill_->store(i, state.prepared);

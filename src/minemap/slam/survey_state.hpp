@@ -27,6 +27,18 @@
 
 namespace minemap::detail {
 
+/// A scan's model points, held one of two ways (see SurveyState::model_points).
+class ModelPoints {
+ public:
+  explicit ModelPoints(std::shared_ptr<const PreparedCloud> held) : held_(std::move(held)) {}
+  explicit ModelPoints(std::vector<Eigen::Vector3f> read) : read_(std::move(read)) {}
+  std::span<const Eigen::Vector3f> points() const { return held_ ? held_->points() : std::span(read_); }
+
+ private:
+  std::shared_ptr<const PreparedCloud> held_;
+  std::vector<Eigen::Vector3f> read_;
+};
+
 class SurveyState {
  public:
   /// Appends `scan` at its initial pose (T_world_file = scan.pose_cm); returns its index.
@@ -35,6 +47,10 @@ class SurveyState {
 
   /// Scan i's clouds (read back from the spill when they were let go of).
   const PreparedScan& prepared(std::size_t i) const;
+  /// Scan i's model points (kept alive by the value): shared with its model cloud when held, else
+  /// read from the spill without taking the scan back (nothing rebuilt, the bound not touched), so
+  /// a union over hundreds of scans let go of costs their points' bytes, not their trees and planes.
+  ModelPoints model_points(std::size_t i) const;
   /// Holds at most `held_bytes` of clouds (points, the trees built so far, planes), the rest in
   /// `spill`. Before the first add.
   void bound_memory(std::shared_ptr<ScanSpill> spill, std::size_t held_bytes);
