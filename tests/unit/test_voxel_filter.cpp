@@ -58,6 +58,39 @@ TEST(VoxelFilter, RefusesANonPositiveVoxelAndKeepsAnEmptyCloudEmpty) {
 
 // Incremental matching against the metascan (one tree of the registered neighbours) on voxel means:
 // the whole-survey mode of issue 14, on the first 16 scans of the default survey.
+// The OpenCL kernels (kernels/voxel_means.cl) give the host's voxel means bit for bit: the cells'
+// order, their means and the intensities' means; dense cells (hundreds of points, sorted on the
+// device), duplicates, cell borders, negative cells, a cloud with a point beyond the kernels' reach
+// (computed on the host), an empty cloud.
+TEST(VoxelFilter, TheOpenClKernelsGiveTheHostsMeansBitForBit) {
+  const std::unique_ptr<ComputeBackend> opencl = test::opencl_backend();
+  auto points = test::random_cloud(30000, -3000.f, 3000.f, 5);
+  const auto dense = test::random_cloud(2000, 0.f, 14.f, 6);  // about 3 cells of 10 cm: ~700 points each
+  points.insert(points.end(), dense.begin(), dense.end());
+  for (int i = 0; i < 500; ++i) points.push_back(points[static_cast<std::size_t>(7 * i)]);
+  for (float v : {-30.f, -15.f, 0.f, 15.f, 30.f}) points.emplace_back(v, -v, v);
+  std::vector<float> values(points.size());
+  for (std::size_t k = 0; k < values.size(); ++k) values[k] = 0.001f * float((k * 7919) % 100003);
+  CpuBackend cpu;
+  for (const float voxel : {10.f, 15.f, 200.f}) {
+    const auto host = voxel_mean_filter(points, voxel);
+    ASSERT_GT(host.size(), 1000u);
+    EXPECT_EQ(opencl->voxel_means(points, voxel), host) << voxel << " cm";
+    EXPECT_EQ(cpu.voxel_means(points, voxel), host) << voxel << " cm";
+    std::vector<float> host_values, device_values;
+    const auto host_with = voxel_mean_filter(points, voxel, values, host_values);
+    EXPECT_EQ(opencl->voxel_means(points, voxel, values, &device_values), host_with) << voxel << " cm";
+    EXPECT_EQ(device_values, host_values) << voxel << " cm";
+  }
+  auto far = points;
+  far.emplace_back(2.0e7f, 0.f, 0.f);  // 200 km: beyond 2^20 cells of 10 cm
+  EXPECT_EQ(opencl->voxel_means(far, 10.f), voxel_mean_filter(far, 10.f));
+  EXPECT_TRUE(opencl->voxel_means({}, 10.f).empty());
+  EXPECT_THROW(opencl->voxel_means(points, 0.f), std::invalid_argument);
+  std::vector<float> out;
+  EXPECT_THROW(opencl->voxel_means(points, 10.f, std::span(values).first(3), &out), std::invalid_argument);
+}
+
 TEST(VoxelFilter, IncrementalMatchingOnVoxelMeansIsAccurate) {
   sim::SimulationSettings simulation;
   simulation.mine.scans = 16;

@@ -5,11 +5,13 @@
 // block order (same poses as the CPU); without it, pair_sums reduces in float to 64 x 17 partial
 // sums, added by the host in double in group order. Deterministic either way, no atomics.
 // The slice filter: one launch filters all kept slices of a scan, one work-item per slice; each
-// slice writes into its own input range (output never exceeds input).
+// slice writes into its own input range (output never exceeds input). The voxel means: five
+// launches per cloud (kernels/voxel_means.cl), integer atomics only, the host's bits.
 #include "minemap/opencl/opencl_backend.hpp"
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <vector>
 
 #include "minemap/opencl/runtime.hpp"
@@ -77,6 +79,13 @@ class OpenClBackend final : public ComputeBackend {
       pair_sums_ = cl::Kernel(runtime_->program(), "pair_sums");
       if (runtime_->has_fp64()) pair_sums_blocks_ = cl::Kernel(runtime_->program(), "pair_sums_blocks");
       filter_slices_ = cl::Kernel(runtime_->program(), "filter_slices");
+      if (runtime_->has_voxel_means()) {
+        voxel_insert_ = cl::Kernel(runtime_->program(), "voxel_insert");
+        voxel_scan_ = cl::Kernel(runtime_->program(), "voxel_scan");
+        voxel_cells_ = cl::Kernel(runtime_->program(), "voxel_cells");
+        voxel_members_ = cl::Kernel(runtime_->program(), "voxel_members");
+        voxel_sum_ = cl::Kernel(runtime_->program(), "voxel_sum");
+      }
       reduction_group_size_ = runtime_->work_group_size(pair_sums_, kReductionGroupSize);
       if (runtime_->work_group_size(nearest_brute_force_, kBruteTile) < kBruteTile) {
         throw DeviceError("device work-group limit is below the brute-force tile of " + std::to_string(kBruteTile));
@@ -258,6 +267,128 @@ class OpenClBackend final : public ComputeBackend {
     }
   }
 
+  std::vector<Eigen::Vector3f> voxel_means_checked(std::span<const Eigen::Vector3f> points_cm, float voxel_cm,
+                                                   std::span<const float> values,
+                                                   std::vector<float>* value_means) override {
+    // The host's where the device lacks double precision or 64-bit atomics, or a point is out of
+    // the kernels' reach (status): the same bits either way.
+    const auto on_host = [&] { return ComputeBackend::voxel_means_checked(points_cm, voxel_cm, values, value_means); };
+    if (!runtime_->has_voxel_means() || points_cm.empty() || points_cm.size() >= (std::size_t{1} << 30)) return on_host();
+    try {
+      Runtime& runtime = *runtime_;
+      auto& queue = runtime.queue();
+      const auto n = static_cast<cl_uint>(points_cm.size());
+      std::vector<cl_float4> host_points(n);
+      for (cl_uint i = 0; i < n; ++i) host_points[i] = to_float4(points_cm[i].x(), points_cm[i].y(), points_cm[i].z(), 0.0f);
+      const std::size_t table = std::bit_ceil(std::max<std::size_t>(64, 2 * std::size_t{n}));
+      cl::Buffer points = runtime.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n * sizeof(cl_float4), host_points.data());
+      cl::Buffer keys = runtime.buffer(CL_MEM_READ_WRITE, table * sizeof(cl_ulong));
+      cl::Buffer first = runtime.buffer(CL_MEM_READ_WRITE, table * sizeof(cl_uint));
+      cl::Buffer counts = runtime.buffer(CL_MEM_READ_WRITE, table * sizeof(cl_uint));
+      cl::Buffer slot_of = runtime.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_uint));
+      cl::Buffer status = runtime.buffer(CL_MEM_READ_WRITE, sizeof(cl_int));
+      queue.enqueueFillBuffer(keys, ~cl_ulong{0}, 0, table * sizeof(cl_ulong));
+      queue.enqueueFillBuffer(first, ~cl_uint{0}, 0, table * sizeof(cl_uint));
+      queue.enqueueFillBuffer(counts, cl_uint{0}, 0, table * sizeof(cl_uint));
+      queue.enqueueFillBuffer(status, cl_int{0}, 0, sizeof(cl_int));
+      int arg = 0;
+      voxel_insert_.setArg(arg++, points);
+      voxel_insert_.setArg(arg++, n);
+      voxel_insert_.setArg(arg++, 1.0 / static_cast<double>(voxel_cm));  // as the host: cell = floor(v * inverse)
+      voxel_insert_.setArg(arg++, keys);
+      voxel_insert_.setArg(arg++, first);
+      voxel_insert_.setArg(arg++, counts);
+      voxel_insert_.setArg(arg++, static_cast<cl_uint>(table - 1));
+      voxel_insert_.setArg(arg++, slot_of);
+      voxel_insert_.setArg(arg++, status);
+      const std::size_t insert_group = runtime.work_group_size(voxel_insert_, 64);
+      runtime.launch(voxel_insert_, round_up(n, insert_group), insert_group);
+      cl_int out_of_reach = 0;
+      queue.enqueueReadBuffer(status, CL_TRUE, 0, sizeof(cl_int), &out_of_reach);
+      if (out_of_reach != 0) return on_host();
+      // Each point's (is first, cell count if first), prefix-summed per group; the groups' totals
+      // added here in group order, as offsets for the next launch (same group size).
+      const std::size_t group = runtime.work_group_size(voxel_scan_, 256);
+      const std::size_t groups = round_up(n, group) / group;
+      cl::Buffer prefix = runtime.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_uint2));
+      cl::Buffer group_sums = runtime.buffer(CL_MEM_READ_WRITE, groups * sizeof(cl_uint2));
+      arg = 0;
+      voxel_scan_.setArg(arg++, slot_of);
+      voxel_scan_.setArg(arg++, first);
+      voxel_scan_.setArg(arg++, counts);
+      voxel_scan_.setArg(arg++, n);
+      voxel_scan_.setArg(arg++, prefix);
+      voxel_scan_.setArg(arg++, group_sums);
+      voxel_scan_.setArg(arg++, cl::Local(group * sizeof(cl_uint2)));
+      runtime.launch(voxel_scan_, groups * group, group);
+      std::vector<cl_uint2> offsets(groups);
+      queue.enqueueReadBuffer(group_sums, CL_TRUE, 0, groups * sizeof(cl_uint2), offsets.data());
+      cl_uint cells = 0, placed = 0;
+      for (cl_uint2& offset : offsets) {
+        const cl_uint2 total = offset;
+        offset = cl_uint2{{cells, placed}};
+        cells += total.s[0];
+        placed += total.s[1];
+      }
+      if (placed != n) throw DeviceError("voxel means: the cells hold " + std::to_string(placed) + " of " + std::to_string(n) + " points");
+      queue.enqueueWriteBuffer(group_sums, CL_TRUE, 0, groups * sizeof(cl_uint2), offsets.data());
+      cl::Buffer cell_of_slot = runtime.buffer(CL_MEM_READ_WRITE, table * sizeof(cl_uint));
+      cl::Buffer cell_start = runtime.buffer(CL_MEM_READ_WRITE, cells * sizeof(cl_uint));
+      cl::Buffer cell_count = runtime.buffer(CL_MEM_READ_WRITE, cells * sizeof(cl_uint));
+      arg = 0;
+      voxel_cells_.setArg(arg++, slot_of);
+      voxel_cells_.setArg(arg++, first);
+      voxel_cells_.setArg(arg++, counts);
+      voxel_cells_.setArg(arg++, n);
+      voxel_cells_.setArg(arg++, prefix);
+      voxel_cells_.setArg(arg++, group_sums);
+      voxel_cells_.setArg(arg++, cell_of_slot);
+      voxel_cells_.setArg(arg++, cell_start);
+      voxel_cells_.setArg(arg++, cell_count);
+      runtime.launch(voxel_cells_, groups * group, group);
+      cl::Buffer filled = runtime.buffer(CL_MEM_READ_WRITE, cells * sizeof(cl_uint));
+      cl::Buffer member_list = runtime.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_uint));
+      queue.enqueueFillBuffer(filled, cl_uint{0}, 0, cells * sizeof(cl_uint));
+      arg = 0;
+      voxel_members_.setArg(arg++, slot_of);
+      voxel_members_.setArg(arg++, n);
+      voxel_members_.setArg(arg++, cell_of_slot);
+      voxel_members_.setArg(arg++, cell_start);
+      voxel_members_.setArg(arg++, filled);
+      voxel_members_.setArg(arg++, member_list);
+      runtime.launch(voxel_members_, round_up(n, insert_group), insert_group);
+      const bool with_values = value_means != nullptr;
+      cl::Buffer value_buffer =
+          with_values ? runtime.buffer(CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n * sizeof(float), const_cast<float*>(values.data()))
+                      : runtime.buffer(CL_MEM_READ_ONLY, sizeof(float));
+      cl::Buffer means = runtime.buffer(CL_MEM_WRITE_ONLY, cells * sizeof(cl_float4));
+      arg = 0;
+      voxel_sum_.setArg(arg++, points);
+      voxel_sum_.setArg(arg++, value_buffer);
+      voxel_sum_.setArg(arg++, static_cast<cl_int>(with_values ? 1 : 0));
+      voxel_sum_.setArg(arg++, cells);
+      voxel_sum_.setArg(arg++, cell_start);
+      voxel_sum_.setArg(arg++, cell_count);
+      voxel_sum_.setArg(arg++, member_list);
+      voxel_sum_.setArg(arg++, means);
+      const std::size_t sum_group = runtime.work_group_size(voxel_sum_, 64);
+      runtime.launch(voxel_sum_, round_up(cells, sum_group), sum_group);
+      std::vector<cl_float4> host_means(cells);
+      queue.enqueueReadBuffer(means, CL_TRUE, 0, cells * sizeof(cl_float4), host_means.data());
+      std::vector<Eigen::Vector3f> out(cells);
+      for (cl_uint c = 0; c < cells; ++c) out[c] = Eigen::Vector3f(host_means[c].s[0], host_means[c].s[1], host_means[c].s[2]);
+      if (with_values) {
+        value_means->resize(cells);
+        for (cl_uint c = 0; c < cells; ++c) (*value_means)[c] = host_means[c].s[3];
+      }
+      return out;
+    } catch (const DeviceError&) {
+      throw;
+    } catch (...) {
+      rethrow_as_device_error("OpenCL voxel means");
+    }
+  }
+
  private:
   static const OpenClPreparedCloud& as_device(const PreparedCloud& cloud) {
     const auto* device_cloud = dynamic_cast<const OpenClPreparedCloud*>(&cloud);
@@ -340,6 +471,8 @@ class OpenClBackend final : public ComputeBackend {
   std::size_t reduction_group_size_ = kReductionGroupSize;
   cl::Buffer partials_;
   cl::Kernel pair_sums_blocks_;  ///< only on devices with cl_khr_fp64
+  /// kernels/voxel_means.cl, only where Runtime::has_voxel_means.
+  cl::Kernel voxel_insert_, voxel_scan_, voxel_cells_, voxel_members_, voxel_sum_;
   cl::Buffer block_partials_;
   std::size_t block_partials_count_ = 0;
 };

@@ -158,6 +158,9 @@ Runtime::Runtime(cl::Device device, bool is_gpu, const OpenClOptions& options)
     // Without fp64 (or with it turned off) the sums take the float path of pair_sums.
     has_fp64_ = options.fp64 && device_.getInfo<CL_DEVICE_EXTENSIONS>().find("cl_khr_fp64") != std::string::npos;
     if (has_fp64_) build_options += " -DMM_HAVE_FP64=1";
+    has_voxel_means_ =
+        has_fp64_ && device_.getInfo<CL_DEVICE_EXTENSIONS>().find("cl_khr_int64_base_atomics") != std::string::npos;
+    if (has_voxel_means_) build_options += " -DMM_HAVE_VOXEL_MEANS=1";
     const bool broken = fault_.kind == InjectedFault::Kind::kBuild;
     program_ = cl::Program(context_, kernel_source() + (broken ? kInjectedBuildFault : ""));
     program_.build({device_}, build_options.c_str());

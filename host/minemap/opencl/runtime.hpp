@@ -43,6 +43,9 @@ class Runtime {
   /// The device does double precision (cl_khr_fp64): the ICP sums are then made exactly as the CPU
   /// backend makes them (kernel pair_sums_blocks), and both backends give the same bits.
   bool has_fp64() const { return has_fp64_; }
+  /// The device does double precision and 64-bit atomics (cl_khr_int64_base_atomics): the voxel
+  /// means run there (kernels/voxel_means.cl), else on the host; the same bits either way.
+  bool has_voxel_means() const { return has_voxel_means_; }
 
   /// clCreateBuffer; every device buffer is made here, so an injected allocation fault takes the
   /// path of a real one (cl::Error with CL_MEM_OBJECT_ALLOCATION_FAILURE).
@@ -60,6 +63,7 @@ class Runtime {
   bool is_gpu_ = false;
   std::size_t max_alloc_bytes_ = 0;
   bool has_fp64_ = false;
+  bool has_voxel_means_ = false;
   InjectedFault fault_;
   long launches_ = 0;
   long allocations_ = 0;

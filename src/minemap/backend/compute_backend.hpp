@@ -1,6 +1,6 @@
 #pragma once
 // The one seam between the algorithm and the hardware: a compute backend prepares clouds (kd-tree
-// and device copies), pairs and sums for ICP, and runs the slice filter. Everything else (Horn's
+// and device copies), pairs and sums for ICP, and runs the slice filter and the voxel means. Everything else (Horn's
 // method, the ICP schedule, the relaxation) runs on the host and calls a backend it is handed.
 //
 // Backends are values the caller owns, one file each:
@@ -14,6 +14,7 @@
 // Both backends compute the same float and double operations in the same order
 // (minemap/shared/minemap_shared.h): on a device with double precision they return the same bits.
 #include <Eigen/Core>
+#include <cmath>
 #include <memory>
 #include <span>
 #include <stdexcept>
@@ -21,6 +22,7 @@
 #include <vector>
 
 #include "minemap/filter/slice_filter.hpp"
+#include "minemap/filter/voxel_filter.hpp"
 #include "minemap/search/pair_sums.hpp"
 #include "minemap/search/pairing.hpp"
 
@@ -79,7 +81,32 @@ class ComputeBackend {
     return scan.has_slices() ? filter_slices_checked(scan, settings) : unfiltered_result(scan, name());
   }
 
+  /// The voxel means of a cloud (filter/voxel_filter.hpp), and of `values` (one per point) into
+  /// `value_means` when that is given: voxel_mean_filter's result bit for bit on every backend.
+  /// Throws std::invalid_argument where voxel_mean_filter does.
+  std::vector<Eigen::Vector3f> voxel_means(std::span<const Eigen::Vector3f> points_cm, float voxel_cm,
+                                           std::span<const float> values = {},
+                                           std::vector<float>* value_means = nullptr) {
+    if (!(voxel_cm > 0.0f) || !std::isfinite(voxel_cm)) throw std::invalid_argument("voxel size must be a finite length > 0 cm");
+    if (value_means != nullptr && values.size() != points_cm.size()) {
+      throw std::invalid_argument("voxel means: one value per point expected");
+    }
+    return voxel_means_checked(points_cm, voxel_cm, value_means ? values : std::span<const float>{}, value_means);
+  }
+
+  /// Whether voxel_means may be called from several threads at once (the host's code is a pure
+  /// function): a survey's scans are then reduced in parallel tasks, otherwise one after another.
+  virtual bool concurrent_voxel_means() const { return false; }
+
  protected:
+  /// voxel_means for valid arguments (`value_means` null: no values). This default is the host's.
+  virtual std::vector<Eigen::Vector3f> voxel_means_checked(std::span<const Eigen::Vector3f> points_cm, float voxel_cm,
+                                                           std::span<const float> values,
+                                                           std::vector<float>* value_means) {
+    return value_means ? voxel_mean_filter(points_cm, voxel_cm, values, *value_means)
+                       : voxel_mean_filter(points_cm, voxel_cm);
+  }
+
   /// filter_slices for a scan with slices and validated settings.
   virtual SliceFilterResult filter_slices_checked(const Scan& scan, const SliceFilterSettings& settings) = 0;
 };

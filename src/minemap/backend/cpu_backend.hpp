@@ -23,6 +23,8 @@ class CpuBackend final : public ComputeBackend {
                         const PairingSettings& settings) override;
   std::vector<NearestPair> nearest(const PreparedCloud& data, std::span<const ModelPlacement> models,
                                    SearchMethod method, const PairingSettings& settings) override;
+  /// The voxel means are the host's voxel_mean_filter (the base class's), a pure function.
+  bool concurrent_voxel_means() const override { return true; }
 
  protected:
   SliceFilterResult filter_slices_checked(const Scan& scan, const SliceFilterSettings& settings) override;

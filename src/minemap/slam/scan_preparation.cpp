@@ -4,7 +4,6 @@
 
 #include <algorithm>
 
-#include "minemap/filter/voxel_filter.hpp"
 
 namespace minemap::detail {
 
@@ -12,11 +11,11 @@ ScanPreparation::VoxelMeans ScanPreparation::voxel_means(const Scan& scan) const
   VoxelMeans means;
   if (settings_.reduction != Reduction::kVoxel) return means;
   if (scan.attributes.intensity.empty()) {
-    means.data = voxel_mean_filter(scan.points_cm, settings_.voxel_cm);
+    means.data = backend_.voxel_means(scan.points_cm, settings_.voxel_cm);
   } else {
-    means.data = voxel_mean_filter(scan.points_cm, settings_.voxel_cm, scan.attributes.intensity, means.intensity);
+    means.data = backend_.voxel_means(scan.points_cm, settings_.voxel_cm, scan.attributes.intensity, &means.intensity);
   }
-  if (settings_.voxel_models()) means.model = voxel_mean_filter(scan.points_cm, settings_.model_voxel_cm);
+  if (settings_.voxel_models()) means.model = backend_.voxel_means(scan.points_cm, settings_.model_voxel_cm);
   return means;
 }
 
@@ -135,11 +134,15 @@ PreparedScan ScanPreparation::prepare(const Scan& scan, RunControl& control, con
 
 std::vector<PreparedScan> ScanPreparation::prepare_all(std::span<const Scan> scans, RunControl& control) {
   const std::size_t n = scans.size();
-  // Voxel means are a host computation (the same bits for every backend), one scan per task.
+  // Voxel means, the same bits on every backend: on the host one scan per task, on a device in turn.
   std::vector<VoxelMeans> voxel(n);
   control.timed(&StageTimes::filter_s, [&] {
     if (settings_.reduction != Reduction::kVoxel) return;
-    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) { voxel[i] = voxel_means(scans[i]); });
+    if (backend_.concurrent_voxel_means()) {
+      tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) { voxel[i] = voxel_means(scans[i]); });
+    } else {
+      for (std::size_t i = 0; i < n; ++i) voxel[i] = voxel_means(scans[i]);
+    }
   });
   std::vector<PreparedScan> prepared(n);
   std::vector<std::vector<Eigen::Vector3f>> data(n), models, probes;
