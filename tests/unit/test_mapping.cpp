@@ -409,6 +409,49 @@ TEST(MappingSimulatedMine, AScanLetGoOfGivesTheModelPointsItHeld) {
   EXPECT_EQ(state.prepared(0).model_cloud->point_vector(), models[0]);  // and taken back, the same
 }
 
+// A metascan's union on the OpenCL device (kernels/union.cl) is the host's bit for bit: the points
+// moved in double and cast to float, those outside the box left out, in order; a part that is not
+// the device's (read back from a spill) is placed on the host beside those that are.
+TEST(MappingBackendsAgreeOnUnions, PlacedWithinABoxOnTheDeviceAsOnTheHost) {
+  const std::unique_ptr<ComputeBackend> opencl = test::opencl_backend();
+  CpuBackend cpu;
+  std::vector<std::shared_ptr<const PreparedCloud>> clouds;
+  std::vector<std::vector<Eigen::Vector3f>> read_back;
+  std::vector<UnionPart> parts;
+  for (int k = 0; k < 6; ++k) {
+    clouds.push_back(opencl->prepare(test::random_cloud(3000 + 500 * k, -2000.f, 2000.f, 40 + k), {}));
+    Pose pose = Pose::Identity();
+    pose.block<3, 3>(0, 0) = Eigen::AngleAxisd(0.3 * k + 0.1, Eigen::Vector3d(0.2, -0.5, 1.0).normalized()).toRotationMatrix();
+    pose.block<3, 1>(0, 3) = Eigen::Vector3d(123.456 * k, -98.7 * k, 3.21 * k);
+    parts.push_back({clouds.back()->points(), clouds.back().get(), pose});
+  }
+  read_back.push_back(test::random_cloud(2000, -500.f, 500.f, 49));
+  parts.push_back({read_back.back(), nullptr, parts[2].frame_from_cloud});
+  std::swap(parts[3], parts.back());  // the host's part among the device's
+  const Eigen::Vector3d lo(-1500.0, -1200.0, -900.0), hi(1400.0, 1300.0, 1000.0);
+  const auto host = cpu.placed_within(parts, lo, hi);
+  const auto device = opencl->placed_within(parts, lo, hi);
+  ASSERT_EQ(host.size(), parts.size());
+  std::size_t kept = 0, all = 0;
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    EXPECT_EQ(device[k], host[k]) << "part " << k;
+    kept += host[k].size();
+    all += parts[k].points_cm.size();
+  }
+  EXPECT_GT(kept, all / 10);  // the box cuts: some in, some out
+  EXPECT_LT(kept, all * 9 / 10);
+  // Moved as written (mm_place_point), in double, then cast.
+  const Pose& pose = parts[0].frame_from_cloud;
+  std::size_t next = 0;
+  for (const Eigen::Vector3f& p : parts[0].points_cm) {
+    const Eigen::Vector3d q = pose.block<3, 3>(0, 0) * p.cast<double>() + pose.block<3, 1>(0, 3);
+    if ((q.array() < lo.array()).any() || (q.array() > hi.array()).any()) continue;
+    ASSERT_LT(next, host[0].size());
+    EXPECT_EQ(host[0][next++], q.cast<float>());
+  }
+  EXPECT_EQ(next, host[0].size());
+}
+
 class MappingBackendsAgree : public ::testing::TestWithParam<const char*> {};
 
 // The default (voxel means, metascan) and the paper's relaxation on slice-filtered scans.

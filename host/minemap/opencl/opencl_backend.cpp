@@ -6,7 +6,8 @@
 // sums, added by the host in double in group order. Deterministic either way, no atomics.
 // The slice filter: one launch filters all kept slices of a scan, one work-item per slice; each
 // slice writes into its own input range (output never exceeds input). The voxel means: five
-// launches per cloud (kernels/voxel_means.cl), integer atomics only, the host's bits.
+// launches per cloud (kernels/voxel_means.cl), integer atomics only, the host's bits. A metascan's
+// union: one launch per scan placing its device copy (kernels/union.cl), read back once.
 #include "minemap/opencl/opencl_backend.hpp"
 
 #include <algorithm>
@@ -78,6 +79,7 @@ class OpenClBackend final : public ComputeBackend {
       nearest_brute_force_ = cl::Kernel(runtime_->program(), "nearest_brute_force");
       pair_sums_ = cl::Kernel(runtime_->program(), "pair_sums");
       if (runtime_->has_fp64()) pair_sums_blocks_ = cl::Kernel(runtime_->program(), "pair_sums_blocks");
+      if (runtime_->has_fp64()) place_within_ = cl::Kernel(runtime_->program(), "place_within");
       filter_slices_ = cl::Kernel(runtime_->program(), "filter_slices");
       if (runtime_->has_voxel_means()) {
         voxel_insert_ = cl::Kernel(runtime_->program(), "voxel_insert");
@@ -265,6 +267,71 @@ class OpenClBackend final : public ComputeBackend {
     } catch (...) {
       rethrow_as_device_error("OpenCL slice filter");
     }
+  }
+
+  std::vector<std::vector<Eigen::Vector3f>> placed_within(std::span<const UnionPart> parts, const Eigen::Vector3d& min_cm,
+                                                          const Eigen::Vector3d& max_cm) override {
+    // On the device the parts it holds (all of them while mapping: nothing is let go of on a
+    // device); the rest, and every part on a device without double precision, on the host.
+    std::vector<const OpenClPreparedCloud*> on_device(parts.size(), nullptr);
+    std::vector<std::size_t> offsets(parts.size(), 0), on_host;
+    std::size_t total = 0;
+    for (std::size_t k = 0; k < parts.size(); ++k) {
+      const auto* cloud = runtime_->has_fp64() ? dynamic_cast<const OpenClPreparedCloud*>(parts[k].cloud) : nullptr;
+      if (cloud != nullptr && !parts[k].points_cm.empty() && cloud->points().data() == parts[k].points_cm.data() &&
+          cloud->points().size() == parts[k].points_cm.size()) {
+        on_device[k] = cloud;
+        offsets[k] = total;
+        total += parts[k].points_cm.size();
+      } else {
+        on_host.push_back(k);
+      }
+    }
+    std::vector<std::vector<Eigen::Vector3f>> placed(parts.size());
+    if (total > 0) {
+      try {
+        if (total > union_capacity_) {
+          union_capacity_ = std::max(total, 2 * union_capacity_);
+          union_out_ = runtime_->buffer(CL_MEM_WRITE_ONLY, union_capacity_ * sizeof(cl_float4));
+        }
+        const cl_double4 box_min{{min_cm.x(), min_cm.y(), min_cm.z(), 0.0}};
+        const cl_double4 box_max{{max_cm.x(), max_cm.y(), max_cm.z(), 0.0}};
+        const std::size_t group = runtime_->work_group_size(place_within_, 64);
+        for (std::size_t k = 0; k < parts.size(); ++k) {
+          if (on_device[k] == nullptr) continue;
+          const Pose& to_frame = parts[k].frame_from_cloud;
+          int arg = 0;
+          place_within_.setArg(arg++, on_device[k]->data_);
+          place_within_.setArg(arg++, static_cast<cl_int>(parts[k].points_cm.size()));
+          for (int r = 0; r < 3; ++r) {
+            place_within_.setArg(arg++, cl_double4{{to_frame(r, 0), to_frame(r, 1), to_frame(r, 2), to_frame(r, 3)}});
+          }
+          place_within_.setArg(arg++, box_min);
+          place_within_.setArg(arg++, box_max);
+          place_within_.setArg(arg++, static_cast<cl_int>(offsets[k]));
+          place_within_.setArg(arg++, union_out_);
+          runtime_->launch(place_within_, round_up(parts[k].points_cm.size(), group), group);
+        }
+        std::vector<cl_float4> out(total);
+        runtime_->queue().enqueueReadBuffer(union_out_, CL_TRUE, 0, total * sizeof(cl_float4), out.data());
+        for (std::size_t k = 0; k < parts.size(); ++k) {
+          if (on_device[k] == nullptr) continue;
+          for (std::size_t i = 0; i < parts[k].points_cm.size(); ++i) {
+            const cl_float4& q = out[offsets[k] + i];
+            if (q.s[3] != 0.0f) placed[k].emplace_back(q.s[0], q.s[1], q.s[2]);
+          }
+        }
+      } catch (...) {
+        rethrow_as_device_error("OpenCL union of clouds");
+      }
+    }
+    if (!on_host.empty()) {
+      std::vector<UnionPart> rest;
+      for (const std::size_t k : on_host) rest.push_back(parts[k]);
+      std::vector<std::vector<Eigen::Vector3f>> host = placed_within_on_host(rest, min_cm, max_cm);
+      for (std::size_t h = 0; h < on_host.size(); ++h) placed[on_host[h]] = std::move(host[h]);
+    }
+    return placed;
   }
 
   std::vector<Eigen::Vector3f> voxel_means_checked(std::span<const Eigen::Vector3f> points_cm, float voxel_cm,
@@ -471,6 +538,9 @@ class OpenClBackend final : public ComputeBackend {
   std::size_t reduction_group_size_ = kReductionGroupSize;
   cl::Buffer partials_;
   cl::Kernel pair_sums_blocks_;  ///< only on devices with cl_khr_fp64
+  cl::Kernel place_within_;      ///< kernels/union.cl, only on devices with cl_khr_fp64
+  cl::Buffer union_out_;         ///< place_within's output, grown as unions grow
+  std::size_t union_capacity_ = 0;
   /// kernels/voxel_means.cl, only where Runtime::has_voxel_means.
   cl::Kernel voxel_insert_, voxel_scan_, voxel_cells_, voxel_members_, voxel_sum_;
   cl::Buffer block_partials_;

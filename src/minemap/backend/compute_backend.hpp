@@ -35,6 +35,20 @@ class BackendError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// One cloud of a union of clouds (a metascan, slam/local_map.cpp): its points and the rigid
+/// transform T_frame_cloud that places them in the union's frame.
+struct UnionPart {
+  std::span<const Eigen::Vector3f> points_cm;
+  /// The same points as this backend prepared them (a device copy), or null (read back from a spill).
+  const PreparedCloud* cloud = nullptr;
+  Pose frame_from_cloud = Pose::Identity();
+};
+
+/// The host's placed_within (ComputeBackend): each part's points in parallel tasks (TBB).
+std::vector<std::vector<Eigen::Vector3f>> placed_within_on_host(std::span<const UnionPart> parts,
+                                                                const Eigen::Vector3d& min_cm,
+                                                                const Eigen::Vector3d& max_cm);
+
 /// Thread-safety: a backend is used from one thread at a time (it parallelises internally, and owns
 /// scratch state); the clouds it prepares are immutable and may be read from any thread, as long as
 /// the backend lives.
@@ -92,6 +106,15 @@ class ComputeBackend {
       throw std::invalid_argument("voxel means: one value per point expected");
     }
     return voxel_means_checked(points_cm, voxel_cm, value_means ? values : std::span<const float>{}, value_means);
+  }
+
+  /// Each part's points moved into the union's frame (in double, shared::mm_place_point, then cast
+  /// to float), those outside the box [min_cm, max_cm] left out, in point order: one list per part,
+  /// the same bits on every backend. Parts with a cloud of this backend's may be placed on its device.
+  virtual std::vector<std::vector<Eigen::Vector3f>> placed_within(std::span<const UnionPart> parts,
+                                                                  const Eigen::Vector3d& min_cm,
+                                                                  const Eigen::Vector3d& max_cm) {
+    return placed_within_on_host(parts, min_cm, max_cm);
   }
 
   /// Whether voxel_means may be called from several threads at once (the host's code is a pure

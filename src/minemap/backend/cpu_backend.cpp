@@ -9,6 +9,7 @@
 
 #include "minemap/filter/slice_filter_cpu.hpp"
 #include "minemap/search/pairing_math.hpp"
+#include "minemap/shared/minemap_shared.h"
 
 namespace minemap {
 namespace {
@@ -149,6 +150,26 @@ std::vector<NearestPair> CpuBackend::nearest(const PreparedCloud& data, std::spa
 
 SliceFilterResult CpuBackend::filter_slices_checked(const Scan& scan, const SliceFilterSettings& settings) {
   return detail::filter_slices_cpu(scan, settings);
+}
+
+std::vector<std::vector<Eigen::Vector3f>> placed_within_on_host(std::span<const UnionPart> parts,
+                                                                const Eigen::Vector3d& min_cm,
+                                                                const Eigen::Vector3d& max_cm) {
+  // One task per part, each its own list: the same lists for any thread count.
+  std::vector<std::vector<Eigen::Vector3f>> placed(parts.size());
+  tbb::parallel_for(std::size_t{0}, parts.size(), [&](std::size_t k) {
+    double rows[12];
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 4; ++c) rows[4 * r + c] = parts[k].frame_from_cloud(r, c);
+    }
+    for (const Eigen::Vector3f& p : parts[k].points_cm) {
+      Eigen::Vector3d q;
+      shared::mm_place_point(rows, double(p.x()), double(p.y()), double(p.z()), q.data());
+      if ((q.array() < min_cm.array()).any() || (q.array() > max_cm.array()).any()) continue;
+      placed[k].push_back(q.cast<float>());
+    }
+  });
+  return placed;
 }
 
 std::unique_ptr<ComputeBackend> make_cpu_backend() { return std::make_unique<CpuBackend>(); }

@@ -170,19 +170,15 @@ std::shared_ptr<const PreparedCloud> LocalMap::union_of(const SurveyState& state
   const std::array<Eigen::Vector3f, 2> corners = {own.bounds_min(), own.bounds_max()};
   const Bounds3d reach = world_bounds(corners, frame_inverse * at);
   const Eigen::Vector3d reach_min = reach.min_cm.array() - grow_cm, reach_max = reach.max_cm.array() + grow_cm;
-  // One task per scan, concatenated in the list's order: the same union for any thread count.
-  std::vector<std::vector<Eigen::Vector3f>> parts(near.size());
-  tbb::parallel_for(std::size_t{0}, near.size(), [&](std::size_t k) {
-    const Pose to_frame = frame_inverse * state.pose(near[k]);
-    const Eigen::Matrix3d rotation = to_frame.block<3, 3>(0, 0);
-    const Eigen::Vector3d translation = to_frame.block<3, 1>(0, 3);
-    const ModelPoints model = state.model_points(near[k]);  // a scan let go of is read, not taken back
-    for (const Eigen::Vector3f& p : model.points()) {
-      const Eigen::Vector3d q = rotation * p.cast<double>() + translation;
-      if ((q.array() < reach_min.array()).any() || (q.array() > reach_max.array()).any()) continue;
-      parts[k].push_back(q.cast<float>());
-    }
-  });
+  // Each scan's model points where it stands, within reach, concatenated in the list's order.
+  std::vector<ModelPoints> models;
+  models.reserve(near.size());
+  for (const std::size_t j : near) models.push_back(state.model_points(j));  // one let go of is read, not taken back
+  std::vector<UnionPart> placed(near.size());
+  for (std::size_t k = 0; k < near.size(); ++k) {
+    placed[k] = {models[k].points(), models[k].cloud(), frame_inverse * state.pose(near[k])};
+  }
+  const std::vector<std::vector<Eigen::Vector3f>> parts = backend_.placed_within(placed, reach_min, reach_max);
   return backend_.prepare(thin_cm > 0.0 ? first_point_per_cell(parts, thin_cm) : concatenated(parts), settings_.tree);
 }
 

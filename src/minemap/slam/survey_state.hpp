@@ -33,6 +33,8 @@ class ModelPoints {
   explicit ModelPoints(std::shared_ptr<const PreparedCloud> held) : held_(std::move(held)) {}
   explicit ModelPoints(std::vector<Eigen::Vector3f> read) : read_(std::move(read)) {}
   std::span<const Eigen::Vector3f> points() const { return held_ ? held_->points() : std::span(read_); }
+  /// The model cloud itself when held (with its backend's device copy), else null.
+  const PreparedCloud* cloud() const { return held_.get(); }
 
  private:
   std::shared_ptr<const PreparedCloud> held_;
