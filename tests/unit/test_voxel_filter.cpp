@@ -61,7 +61,9 @@ TEST(VoxelFilter, RefusesANonPositiveVoxelAndKeepsAnEmptyCloudEmpty) {
 // The OpenCL kernels (kernels/voxel_means.cl) give the host's voxel means bit for bit: the cells'
 // order, their means and the intensities' means; dense cells (hundreds of points, sorted on the
 // device), duplicates, cell borders, negative cells, a cloud with a point beyond the kernels' reach
-// (computed on the host), an empty cloud.
+// (computed on the host), an empty cloud. What PoCL cannot show: the sort of each cell's points
+// before summing (a GPU's atomics hand out places in any order, PoCL's in the points' order; and a
+// cell's points, all within one voxel, mostly sum exactly in double in any order).
 TEST(VoxelFilter, TheOpenClKernelsGiveTheHostsMeansBitForBit) {
   const std::unique_ptr<ComputeBackend> opencl = test::opencl_backend();
   auto points = test::random_cloud(30000, -3000.f, 3000.f, 5);
