@@ -270,6 +270,8 @@ void MapOptionTable::declare_loops(MapOptions& map, MappingSettings& mapping) {
   number(g, "--loop-distance-cm", loops.max_distance_cm, "Loop candidates: scans whose positions are this close (cm)");
   number(g, "--loop-min-scan-gap", loops.min_scan_gap, "Loop candidates: at least this many scans apart...");
   number(g, "--loop-min-path-cm", loops.min_path_cm, "...with at least this much drive between them");
+  number(g, "--loop-return-max-path-cm", loops.max_return_path_cm,
+         "A return to known places longer than this drive gets one loop edge per this much (cm; 0 = one edge a return)");
   numbers(g, "--loop-bound-factors", loops.bound_factors,
           "A loop match tries these multiples of the pair bound, coarse to fine (comma-separated)");
   flag(g, "--loop-edges-alike", map.loop_edges_alike,

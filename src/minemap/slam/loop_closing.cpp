@@ -55,7 +55,11 @@ std::vector<std::vector<LoopClosing::Candidate>> LoopClosing::returns(const Surv
       if (d < best.distance_cm) best = {i, j, d};
     }
     if (best.from == n) continue;
-    if (found.empty() || found.back().back().to + 1 != j) found.emplace_back();
+    const double longest = settings_.loops.max_return_path_cm;
+    if (found.empty() || found.back().back().to + 1 != j ||
+        (longest > 0.0 && driven[j] - driven[found.back().front().to] > longest)) {
+      found.emplace_back();
+    }
     found.back().push_back(best);
   }
   for (std::vector<Candidate>& candidates : found) {
@@ -156,6 +160,12 @@ void LoopClosing::judge_again(SurveyState& state, const RunControl& control) con
     health.moved_cm = old.moved_cm;
     health.retry_bound_cm = old.retry_bound_cm;
     health.after_loop_closure = true;
+    if (old.failed == HealthTest::kUnconfirmed && old.doubtful()) {
+      // Two starts that disagreed: a fit against the whole map does not answer that (a corridor's
+      // walls fit as well metres along it: a 10-lap patrol kept a 4.8 m slip this way, exit 0).
+      health.doubt = old.doubt;
+      health.failed = old.failed;
+    }
     state.judged(k, std::move(health));
     state.release_over_budget();
   }

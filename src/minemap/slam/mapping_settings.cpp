@@ -165,6 +165,9 @@ void LoopClosureSettings::validate() const {
   if (!(max_distance_cm > 0.0) || !std::isfinite(max_distance_cm)) {
     throw std::invalid_argument("the loop candidates' distance must be a finite length > 0 cm");
   }
+  if (!(max_return_path_cm >= 0.0) || !std::isfinite(max_return_path_cm)) {
+    throw std::invalid_argument("a loop return's longest drive must be a finite length >= 0 cm (0: never cut)");
+  }
   if (!(min_path_cm >= 0.0) || !std::isfinite(min_path_cm)) {
     throw std::invalid_argument("a loop's least drive must be a finite length >= 0 cm");
   }

@@ -146,6 +146,11 @@ struct LoopClosureSettings {
   /// ...with at least this much drive between them (along the scan positions): in a survey of
   /// scans half a metre apart, 12 scans back is still the same stretch of tunnel, not a loop.
   double min_path_cm = 4000.0;
+  /// A return (scans in a row that all have a candidate) longer than this much drive is cut into
+  /// returns of this length, one loop edge each (0: never cut). A patrol that passes the same loop
+  /// lap after lap is one return from its second lap on: one edge for all of them, and a slip in a
+  /// later lap is never measured against the first (docs/scaling.md, "loops at scale").
+  double max_return_path_cm = 0.0;
   /// The pair bounds a loop match tries, coarse to fine, until one is trusted: what has drifted
   /// further than this over the loop is not closed (and said so).
   std::vector<float> bound_factors = {1.0f, 4.0f, 16.0f};

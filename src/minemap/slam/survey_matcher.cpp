@@ -234,6 +234,7 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
                   double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
                   recent.rms_cm, features->global.why_not.c_str(), starts_apart_cm);
     match.health.doubt = text;
+    match.health.failed = HealthTest::kUnconfirmed;
     features_said_ = true;
     return;
   }
@@ -263,6 +264,7 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
                   recent.rms_cm);
   }
   match.health.doubt = text;
+  match.health.failed = HealthTest::kUnconfirmed;
 }
 
 bool SurveyMatcher::recovery_on(std::size_t i) const {
