@@ -4,7 +4,6 @@
 
 #include <algorithm>
 
-
 namespace minemap::detail {
 
 ScanPreparation::VoxelMeans ScanPreparation::voxel_means(const Scan& scan) const {

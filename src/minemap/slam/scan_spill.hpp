@@ -10,8 +10,8 @@
 // The file is opened in the folder it is given and unlinked at once (POSIX): nothing is left behind,
 // even by a crash, and the disk space returns when the last holder lets go of the spill.
 //
-// Thread-safety: store() from one thread; load(), points_of() and model_points_of() from any (pread, no shared
-// position), also while store() runs. Reading builds clouds on the backend: the CPU backend's
+// Thread-safety: store() from one thread; load(), points_of() and model_points_of() from any
+// (pread, no shared position), also while store() runs. Reading builds clouds on the backend: the CPU backend's
 // prepare is reentrant; no other backend is handed one (PartwiseMapper maps on the CPU only).
 #include <cstdint>
 #include <filesystem>
