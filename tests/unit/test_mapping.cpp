@@ -440,7 +440,7 @@ TEST(MappingBackendsAgreeOnUnions, PlacedWithinABoxOnTheDeviceAsOnTheHost) {
   }
   EXPECT_GT(kept, all / 10);  // the box cuts: some in, some out
   EXPECT_LT(kept, all * 9 / 10);
-  // Moved as written (mm_place_point), in double, then cast.
+  // Moved as the union always moved them (Eigen's product in double, then cast), clipped, in order.
   const Pose& pose = parts[0].frame_from_cloud;
   std::size_t next = 0;
   for (const Eigen::Vector3f& p : parts[0].points_cm) {

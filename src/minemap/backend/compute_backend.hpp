@@ -108,8 +108,8 @@ class ComputeBackend {
     return voxel_means_checked(points_cm, voxel_cm, value_means ? values : std::span<const float>{}, value_means);
   }
 
-  /// Each part's points moved into the union's frame (in double, shared::mm_place_point, then cast
-  /// to float), those outside the box [min_cm, max_cm] left out, in point order: one list per part,
+  /// Each part's points moved into the union's frame (in double, each row's terms added in
+  /// shared::mm_place_point's order, then cast to float), those outside the box [min_cm, max_cm] left out, in point order: one list per part,
   /// the same bits on every backend. Parts with a cloud of this backend's may be placed on its device.
   virtual std::vector<std::vector<Eigen::Vector3f>> placed_within(std::span<const UnionPart> parts,
                                                                   const Eigen::Vector3d& min_cm,

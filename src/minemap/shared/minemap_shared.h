@@ -81,6 +81,8 @@ inline void mm_add_point_to_point_terms(double* acc, const double* pc, const dou
 
 /// A point moved by a rigid transform in double, as a metascan's union moves each scan's model
 /// points: q_r = ((R_r0 x + R_r1 y) + R_r2 z) + t_r, `rows` row-major (4 r: R_r0, R_r1, R_r2, t_r).
+/// The kernel's step; the host keeps Eigen's product (R p + t), vectorised, which adds in this order
+/// (MappingBackendsAgreeOnUnions holds the two to the same bits).
 inline void mm_place_point(const double* rows, double x, double y, double z, double* q) {
   for (int r = 0; r < 3; ++r) q[r] = ((rows[4 * r] * x + rows[4 * r + 1] * y) + rows[4 * r + 2] * z) + rows[4 * r + 3];
 }
