@@ -1,7 +1,8 @@
 #pragma once
 // The one seam between the algorithm and the hardware: a compute backend prepares clouds (kd-tree
-// and device copies), pairs and sums for ICP, and runs the slice filter and the voxel means. Everything else (Horn's
-// method, the ICP schedule, the relaxation) runs on the host and calls a backend it is handed.
+// and device copies), pairs and sums for ICP, runs the slice filter and the voxel means, and places
+// a metascan's scans. Everything else (Horn's method, the ICP schedule, the relaxation) runs on the
+// host and calls a backend it is handed.
 //
 // Backends are values the caller owns, one file each:
 //   CpuBackend     backend/cpu_backend.cpp: TBB over fixed blocks, deterministic
@@ -109,8 +110,9 @@ class ComputeBackend {
   }
 
   /// Each part's points moved into the union's frame (in double, each row's terms added in
-  /// shared::mm_place_point's order, then cast to float), those outside the box [min_cm, max_cm] left out, in point order: one list per part,
-  /// the same bits on every backend. Parts with a cloud of this backend's may be placed on its device.
+  /// shared::mm_place_point's order, then cast to float), those outside the box [min_cm, max_cm]
+  /// left out, in point order: one list per part, the same bits on every backend. Parts with a
+  /// cloud of this backend's may be placed on its device.
   virtual std::vector<std::vector<Eigen::Vector3f>> placed_within(std::span<const UnionPart> parts,
                                                                   const Eigen::Vector3d& min_cm,
                                                                   const Eigen::Vector3d& max_cm) {
