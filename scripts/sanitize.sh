@@ -21,8 +21,9 @@
 # checks stay out, each 15-24 s in Release and minutes under a sanitizer, whose code smaller tests
 # run here: MappingSimulatedMine.TheBoundedRelaxationIsAsAccurateAsThePapersQueue (the bounded and
 # the paper's queue: MappingDeterminism, Presets/*), HealthRealData.CarScans... (the health checks
-# and retries: HealthSurveys.*, Health.*), MappingLoops.ALoopSurveyIsClosedAndItsEndsAgree (loop
-# closing: Cli.ALoopSurveyIsClosedAndReported, PoseGraph.*). So do two moving-sensor drives (5 and
+# and retries: HealthSurveys.*, Health.*), MappingLoops.ALoopSurveyIsClosedAndItsEndsAgree and
+# MappingLoops.APatrolsLapsAreTiedTogetherEveryHundredMetres (20 s: loop closing runs in
+# Cli.ALoopSurveyIsClosedAndReported, PoseGraph.*). So do two moving-sensor drives (5 and
 # 23 s in Release): MovingMapping.SpinningAtTenMetresPerSecondWithoutOdometry and its weaving twin (the motion model,
 # deskew and local map run here in MovingCli.MapReadsTheSweepsAndAgreesWithTheTruthFrame) and
 # MappingLoops.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot (the loop verdicts run here in
@@ -78,7 +79,7 @@ cc="${cxx/clang++/clang}"; cc="${cc/g++/gcc}"
 jobs="${SANITIZE_JOBS:-$(nproc)}"
 timeout="${SANITIZE_TIMEOUT:-900}"
 supp="$repo_root/tests/sanitizers"
-heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBoundOrRight|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|MovingMapping\.TheDeskewKeepsAWeavingSensorsMapFiveTimesCloser|LiveMapper\..*|Recovery\..*|Cli\.ScansOutOfReachAreRecoveredOrConfirmedAndSaySo|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package|ControlTie\.AStraightDriveTiedToItsStationsLandsInTheGrid|ControlTie\.ABlunderIsNamedAndLeftOut|ControlTie\.TargetsOnTheRibsTieTheMapToo)$'
+heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBoundOrRight|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.APatrolsLapsAreTiedTogetherEveryHundredMetres|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|MovingMapping\.TheDeskewKeepsAWeavingSensorsMapFiveTimesCloser|LiveMapper\..*|Recovery\..*|Cli\.ScansOutOfReachAreRecoveredOrConfirmedAndSaySo|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package|ControlTie\.AStraightDriveTiedToItsStationsLandsInTheGrid|ControlTie\.ABlunderIsNamedAndLeftOut|ControlTie\.TargetsOnTheRibsTieTheMapToo)$'
 # TSan only: runs of the single-threaded parsers through the CLI (ASan checks them).
 heavy_thread='^(BadInput\.MapCommandGivesEachCaseItsExitCodeAndLeavesTheOutputFolder)$'
 

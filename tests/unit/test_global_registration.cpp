@@ -232,6 +232,10 @@ TEST(Recovery, ALostTrackIsFoundAgainOrNamed) {
               errors.mean_translation_cm, errors.max_translation_cm, result.doubtful().size(),
               translation_norm(step_error), result.scans[20].health.doubt.c_str());
   EXPECT_TRUE(translation_norm(step_error) < 30.0 || result.scans[20].health.doubtful());
+  // A far retry that nothing confirmed is not kept: the scan stays where its first match put it.
+  if (result.scans[20].health.doubtful() && result.scans[20].health.retry_bound_cm == 0.0f) {
+    EXPECT_NE(result.scans[20].health.doubt.find("stays where its first match put it"), std::string::npos);
+  }
   // The case is a hard one: without recovery (and its independent start) the map is metres off.
   MappingSettings off;
   off.recovery.enabled = false;

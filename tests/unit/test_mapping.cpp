@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <fstream>
 
@@ -142,6 +143,63 @@ TEST(MappingLoops, ALoopSurveyIsClosedAndItsEndsAgree) {
   EXPECT_LT(end_error(closed), end_error(open));
   EXPECT_LT(closed_errors.mean_translation_cm, open_errors.mean_translation_cm);
   EXPECT_LE(closed_errors.mean_translation_cm, 0.001 * closed_errors.path_length_cm);
+}
+
+// A patrol: four laps of a 120 m loop. From its second lap on every scan is near an earlier one, one
+// long return: with one loop edge for it the laps drift apart between edges. Cut every 100 m of
+// drive (LoopClosureSettings::max_return_path_cm) each piece gets its own edge, and each closed edge
+// carries the scans after it to where it found its scan before the next piece is looked for.
+TEST(MappingLoops, APatrolsLapsAreTiedTogetherEveryHundredMetres) {
+  sim::SimulationSettings sim_settings;
+  sim_settings.mine.seed = 1;
+  sim_settings.mine.loop_length_cm = 12000.0;
+  sim_settings.mine.scans = 120;
+  const auto survey = sim::simulate_mine_survey(sim_settings);
+  ASSERT_EQ(survey.scans.size(), 120u);
+  CpuBackend cpu;
+  MappingSettings settings;
+  const auto tied = map_survey(survey.scans, settings, cpu);
+  settings.loops.max_return_path_cm = 0.0;  // one edge a return
+  const auto once = map_survey(survey.scans, settings, cpu);
+  ASSERT_TRUE(tied.all_registered());
+  EXPECT_TRUE(tied.doubtful().empty());
+  const auto closed = [](const MappingResult& result) {
+    int count = 0;
+    for (const LoopClosure& loop : result.loops) count += loop.closed ? 1 : 0;
+    return count;
+  };
+  EXPECT_GE(closed(tied), 3);
+  EXPECT_EQ(closed(once), 1);
+  // Each scan of laps 2-4 against the scan of lap 1 nearest it in truth: where the map puts one
+  // from the other, against the truth (cm).
+  const auto lap_disagreement = [&](const MappingResult& result) {
+    const std::vector<Pose> poses = poses_of(result);
+    std::vector<double> apart;
+    for (std::size_t j = 30; j < poses.size(); ++j) {
+      std::size_t nearest = 0;
+      for (std::size_t i = 1; i < 30; ++i) {
+        if ((survey.truth_cm[i].block<3, 1>(0, 3) - survey.truth_cm[j].block<3, 1>(0, 3)).norm() <
+            (survey.truth_cm[nearest].block<3, 1>(0, 3) - survey.truth_cm[j].block<3, 1>(0, 3)).norm()) {
+          nearest = i;
+        }
+      }
+      const Eigen::Vector3d mapped = poses[j].block<3, 1>(0, 3) - poses[nearest].block<3, 1>(0, 3);
+      const Eigen::Vector3d truth = survey.truth_cm[j].block<3, 1>(0, 3) - survey.truth_cm[nearest].block<3, 1>(0, 3);
+      apart.push_back((mapped - truth).norm());
+    }
+    std::nth_element(apart.begin(), apart.begin() + apart.size() / 2, apart.end());
+    return apart[apart.size() / 2];
+  };
+  const auto tied_errors = pose_errors(poses_of(tied), survey.truth_cm);
+  const auto once_errors = pose_errors(poses_of(once), survey.truth_cm);
+  std::printf("patrol of %.0f m: laps from the first (median) %.1f cm tied every 100 m, %.1f cm one edge a return; "
+              "mean error %.1f / %.1f cm\n",
+              tied_errors.path_length_cm / 100.0, lap_disagreement(tied), lap_disagreement(once),
+              tied_errors.mean_translation_cm, once_errors.mean_translation_cm);
+  EXPECT_LT(lap_disagreement(tied), 20.0);
+  EXPECT_LT(lap_disagreement(tied), 0.5 * lap_disagreement(once));
+  EXPECT_LT(tied_errors.mean_translation_cm, 0.5 * once_errors.mean_translation_cm);
+  EXPECT_LE(tied_errors.mean_translation_cm, 0.0005 * tied_errors.path_length_cm);
 }
 
 TEST(MappingInterruption, AStopBetweenScansKeepsTheScansMatchedSoFar) {

@@ -54,9 +54,7 @@ struct HealthSettings {
 };
 
 /// Which test a doubtful match failed (the first, in the order below).
-/// kUnconfirmed: not a test of the fit; a retry that landed far from the prediction and that a second
-/// match from another start did not confirm (slam/survey_matcher.cpp): no fit figure answers it.
-enum class HealthTest { kNone, kReach, kPaired, kBeyondBound, kEdge, kConstraint, kUnconfirmed };
+enum class HealthTest { kNone, kReach, kPaired, kBeyondBound, kEdge, kConstraint };
 
 /// The figures of one judged match, and the verdict.
 struct RegistrationHealth {

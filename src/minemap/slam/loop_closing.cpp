@@ -35,7 +35,8 @@ std::vector<PoseGraphEdge> LoopClosing::chain(SurveyState& state, const RunContr
   return edges;
 }
 
-std::vector<std::vector<LoopClosing::Candidate>> LoopClosing::returns(const SurveyState& state) const {
+LoopClosing::Return LoopClosing::next_return(const SurveyState& state, const std::vector<Pose>& guess,
+                                             const std::vector<double>& driven, std::size_t first) const {
   // For each scan, the nearest scan at least `gap` earlier, when near enough. Scans in a row that
   // all have one are one return to a known place: one loop edge for it, from the pair that stands
   // closest (the others see less of each other: a scan in a cross-cut against one in the drive),
@@ -43,37 +44,40 @@ std::vector<std::vector<LoopClosing::Candidate>> LoopClosing::returns(const Surv
   // the relaxation towards their disagreement.
   const std::size_t n = state.size();
   const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
-  const auto position = [&](std::size_t k) { return state.pose(k).block<3, 1>(0, 3); };
-  const std::vector<double> driven = driven_cm(state);
-  std::vector<std::vector<Candidate>> found;
-  for (std::size_t j = gap; j < n; ++j) {
-    if (!state.registered(j)) continue;
+  const auto position = [&](std::size_t k) { return guess[k].block<3, 1>(0, 3); };
+  Return found;
+  found.end = n;
+  for (std::size_t j = std::max(first, gap); j < n; ++j) {
+    found.end = j + 1;
+    if (!state.registered(j)) {
+      if (found.candidates.empty()) continue;
+      found.end = j;
+      break;
+    }
     Candidate best{n, j, settings_.loops.max_distance_cm};
     for (std::size_t i = 0; i + gap <= j; ++i) {
       if (!state.registered(i) || driven[j] - driven[i] < settings_.loops.min_path_cm) continue;
       const double d = (position(i) - position(j)).norm();
       if (d < best.distance_cm) best = {i, j, d};
     }
-    if (best.from == n) continue;
     const double longest = settings_.loops.max_return_path_cm;
-    if (found.empty() || found.back().back().to + 1 != j ||
-        (longest > 0.0 && driven[j] - driven[found.back().front().to] > longest)) {
-      found.emplace_back();
+    if (best.from == n || (!found.candidates.empty() && longest > 0.0 &&
+                           driven[j] - driven[found.candidates.front().to] > longest)) {
+      if (found.candidates.empty()) continue;
+      found.end = j;
+      break;
     }
-    found.back().push_back(best);
+    found.candidates.push_back(best);
   }
-  for (std::vector<Candidate>& candidates : found) {
-    std::stable_sort(candidates.begin(), candidates.end(),
-                     [](const Candidate& a, const Candidate& b) { return a.distance_cm < b.distance_cm; });
-  }
+  std::stable_sort(found.candidates.begin(), found.candidates.end(),
+                   [](const Candidate& a, const Candidate& b) { return a.distance_cm < b.distance_cm; });
   return found;
 }
 
-std::optional<Pose> LoopClosing::loop_match(const SurveyState& state, std::size_t i, std::size_t j,
+std::optional<Pose> LoopClosing::loop_match(const SurveyState& state, std::size_t i, std::size_t j, const Pose& start,
                                             std::string& doubt, bool& converged) const {
   const std::size_t model[] = {i};
   const std::vector<WorldModel> models = state.models_of(model);
-  const Pose start = state.pose(j);
   for (const float factor : settings_.loops.bound_factors) {
     const float bound = factor * registration_.icp().max_pair_dist_cm;
     if (bound > settings_.max_retry_bound_cm) break;
@@ -160,12 +164,6 @@ void LoopClosing::judge_again(SurveyState& state, const RunControl& control) con
     health.moved_cm = old.moved_cm;
     health.retry_bound_cm = old.retry_bound_cm;
     health.after_loop_closure = true;
-    if (old.failed == HealthTest::kUnconfirmed && old.doubtful()) {
-      // Two starts that disagreed: a fit against the whole map does not answer that (a corridor's
-      // walls fit as well metres along it: a 10-lap patrol kept a 4.8 m slip this way, exit 0).
-      health.doubt = old.doubt;
-      health.failed = old.failed;
-    }
     state.judged(k, std::move(health));
     state.release_over_budget();
   }
@@ -179,30 +177,45 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, RunControl& cont
   std::vector<Pose> poses(n);
   for (std::size_t k = 0; k < n; ++k) poses[k] = state.pose(k);
   const std::vector<double> driven = driven_cm(state);  // as the chain left the scans
+  // Where the loops closed so far put the scans: each closed edge moves its later scan, and every
+  // scan after it, rigidly to where the match found it, so that the next return is looked for (and
+  // its match started) where the drive really is. Over a patrol of many laps the chain alone drifts
+  // metres from lap to lap, and its later laps would be paired with the wrong places.
+  std::vector<Pose> guess = poses;
   std::vector<PoseGraphEdge> loop_edges;  // the loops' edges; the chain's come first in the graph
   std::vector<LoopClosure> unclosed_returns;  // the first converged, untrusted candidate of each
   const RunControl::Stopwatch matching;
-  for (const std::vector<Candidate>& candidates : returns(state)) {
+  for (std::size_t first = 0; first < n;) {
+    const Return found = next_return(state, guess, driven, first);
+    first = found.end;
     std::optional<LoopClosure> unclosed;
-    for (const Candidate& candidate : candidates) {
+    for (const Candidate& candidate : found.candidates) {
       if (control.stop_requested()) return loops;
       LoopClosure loop;
       loop.from = candidate.from;
       loop.to = candidate.to;
       loop.path_cm = driven[loop.to] - driven[loop.from];
+      // The match starts where the guess puts `to` against `from` (in the state's frame, where
+      // `from`'s model stands); the chain's own pose while no loop has moved one of them.
+      const Pose start = guess[loop.from] == poses[loop.from] && guess[loop.to] == poses[loop.to]
+                             ? poses[loop.to]
+                             : Pose(poses[loop.from] * rigid_inverse(guess[loop.from]) * guess[loop.to]);
       bool converged = false;
-      const std::optional<Pose> matched = loop_match(state, loop.from, loop.to, loop.doubt, converged);
+      const std::optional<Pose> matched = loop_match(state, loop.from, loop.to, start, loop.doubt, converged);
       if (!matched && converged && !unclosed) unclosed = loop;
       if (matched) {
         loop.closed = true;
-        const Pose moved = rigid_inverse(poses[loop.to]) * *matched;
+        const Pose moved = rigid_inverse(poses[loop.to]) * *matched;  // against the chain
         loop.gap_before_cm = translation_norm(moved);
         loop.gap_before_deg = rotation_angle_deg(moved);
-        loop_edges.push_back({loop.from, loop.to, rigid_inverse(poses[loop.from]) * *matched, 1.0});
+        const Pose from_to = rigid_inverse(poses[loop.from]) * *matched;
+        loop_edges.push_back({loop.from, loop.to, from_to, 1.0});
         // At the pose the loop match found, not where the chain left the scan.
         if (geometric(state, loop.to)) {
           loop_edges.back().information = edge_information(state, loop.from, loop.to, *matched);
         }
+        const Pose carry = Pose(guess[loop.from] * from_to) * rigid_inverse(guess[loop.to]);
+        for (std::size_t k = loop.to; k < n; ++k) guess[k] = carry * guess[k];
       }
       loops.push_back(loop);
       state.release_over_budget();

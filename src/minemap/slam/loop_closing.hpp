@@ -2,9 +2,12 @@
 // Internal (not installed). Closing loops after the last scan (MappingSettings::loops; pairwise and
 // incremental matching), as 3DTK's LUM does:
 //  1. find returns by position: for each scan the nearest scan at least min_scan_gap earlier and
-//     min_path_cm of drive back, when near enough; scans in a row that all have one are one return;
+//     min_path_cm of drive back, when near enough; scans in a row that all have one are one return
+//     (cut every loops.max_return_path_cm of drive);
 //  2. match each return's closest pair, coarse to fine (ScanRegistration::match_from_wide_bound),
-//     the next closest when a match is not trusted;
+//     the next closest when a match is not trusted; a trusted match carries its scan and all after
+//     it to where it found the scan before the next return is looked for (a patrol's later laps
+//     drift metres from its first);
 //  3. one pose graph: the chain of scan-to-scan steps as matched plus the trusted loop edges, each
 //     weighted by its match's geometry (point-to-plane information, registration/match_information.hpp);
 //  4. apply the relaxed poses, and judge every scan again where it ended, against the whole map
@@ -48,13 +51,20 @@ class LoopClosing {
     std::size_t from, to;
     double distance_cm;
   };
-  /// Step 1: the returns to known places, each its candidates closest first.
-  std::vector<std::vector<Candidate>> returns(const SurveyState& state) const;
-  /// Step 2: a trusted match of scan j against scan i alone, from j's current pose, at each bound of
-  /// loops.bound_factors in turn. Empty when none is trusted; `doubt` then says why.
-  /// `converged`: some bound's match converged and was judged doubtful (not: no overlap).
-  std::optional<Pose> loop_match(const SurveyState& state, std::size_t i, std::size_t j, std::string& doubt,
-                                 bool& converged) const;
+  /// A return to a known place: its candidates closest first; the next is looked for from `end` on.
+  struct Return {
+    std::vector<Candidate> candidates;
+    std::size_t end = 0;
+  };
+  /// Step 1: the next return at or after scan `first`, by the positions of `guess` (the chain as
+  /// the loops closed so far moved it); `driven`: the chain's drive to each scan (cm).
+  Return next_return(const SurveyState& state, const std::vector<Pose>& guess, const std::vector<double>& driven,
+                     std::size_t first) const;
+  /// Step 2: a trusted match of scan j against scan i alone, from `start` (j's pose in the state's
+  /// frame), at each bound of loops.bound_factors in turn. Empty when none is trusted; `doubt` then
+  /// says why. `converged`: some bound's match converged and was judged doubtful (not: no overlap).
+  std::optional<Pose> loop_match(const SurveyState& state, std::size_t i, std::size_t j, const Pose& start,
+                                 std::string& doubt, bool& converged) const;
   /// A return none of whose candidates closed, where a match converged but was not trusted: the
   /// map's drift over the loop stays, unmeasured; the return's scan is judged doubtful.
   void doubt_unclosed_return(SurveyState& state, const LoopClosure& loop) const;

@@ -148,9 +148,11 @@ struct LoopClosureSettings {
   double min_path_cm = 4000.0;
   /// A return (scans in a row that all have a candidate) longer than this much drive is cut into
   /// returns of this length, one loop edge each (0: never cut). A patrol that passes the same loop
-  /// lap after lap is one return from its second lap on: one edge for all of them, and a slip in a
-  /// later lap is never measured against the first (docs/scaling.md, "loops at scale").
-  double max_return_path_cm = 0.0;
+  /// lap after lap is one return from its second lap on: with one edge for all of it the laps drift
+  /// apart between edges (4 laps of 120 m: 33 cm from the first lap, 8 cm cut every 100 m; 10 laps
+  /// of 400 m: 50 and 6 cm; docs/scaling.md, "Loops at scale"). A return shorter than this (a
+  /// survey's drive back to its start) keeps its one edge.
+  double max_return_path_cm = 10000.0;
   /// The pair bounds a loop match tries, coarse to fine, until one is trusted: what has drifted
   /// further than this over the loop is not closed (and said so).
   std::vector<float> bound_factors = {1.0f, 4.0f, 16.0f};

@@ -93,6 +93,7 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
       continue;
     }
     retry.health.retry_bound_cm = bound;
+    match.first_health = std::move(match.health);
     match.retry = std::move(retry.fine);
     match.health = std::move(retry.health);
     return match;

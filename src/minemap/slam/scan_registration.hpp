@@ -26,6 +26,7 @@ struct ScanMatch {
   IcpResult first;                 ///< from the start, at the pair bound
   std::optional<IcpResult> retry;  ///< a trusted retry at a wider bound (it replaces `first`)
   RegistrationHealth health;       ///< the verdict on the match kept (none when `first` failed)
+  RegistrationHealth first_health; ///< with a retry: the verdict on `first`, which the retry replaced
   int iterations = 0;              ///< every ICP iteration spent, retries included (Table I's step 1)
   bool ok() const { return first.ok(); }
   /// The match kept: the trusted retry where there is one, else the first.

@@ -233,9 +233,8 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
                   "is %.0f cm from the prediction, within the retry's reach",
                   double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
                   recent.rms_cm, features->global.why_not.c_str(), starts_apart_cm);
-    match.health.doubt = text;
-    match.health.failed = HealthTest::kUnconfirmed;
     features_said_ = true;
+    keep_first_match(match, text);
     return;
   }
   const ScanMatch second = match_from(i, other, convergence);
@@ -263,8 +262,13 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
                   double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
                   recent.rms_cm);
   }
-  match.health.doubt = text;
-  match.health.failed = HealthTest::kUnconfirmed;
+  keep_first_match(match, text);
+}
+
+void SurveyMatcher::keep_first_match(ScanMatch& match, const char* refuted) {
+  match.retry.reset();
+  match.health = std::move(match.first_health);
+  match.health.doubt += std::string(" (") + refuted + "; the scan stays where its first match put it)";
 }
 
 bool SurveyMatcher::recovery_on(std::size_t i) const {
