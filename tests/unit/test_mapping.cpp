@@ -200,6 +200,18 @@ TEST(MappingLoops, APatrolsLapsAreTiedTogetherEveryHundredMetres) {
   EXPECT_LT(lap_disagreement(tied), 0.5 * lap_disagreement(once));
   EXPECT_LT(tied_errors.mean_translation_cm, 0.5 * once_errors.mean_translation_cm);
   EXPECT_LE(tied_errors.mean_translation_cm, 0.0005 * tied_errors.path_length_cm);
+  // A loop match far from where the loops before put its scan is a look-alike place, not an edge:
+  // with the limit at a millionth of the drive every match after the first is refused, and said.
+  settings.loops.max_return_path_cm = MappingSettings{}.loops.max_return_path_cm;
+  settings.loops.max_misclosure_fraction = 1e-6;
+  const auto strict = map_survey(survey.scans, settings, cpu);
+  EXPECT_EQ(closed(strict), 1);
+  bool refused = false;
+  for (const LoopClosure& loop : strict.loops) {
+    refused = refused || loop.doubt.find("from where the loops closed before put it") != std::string::npos;
+  }
+  EXPECT_TRUE(refused);
+  EXPECT_FALSE(strict.doubtful().empty());
 }
 
 TEST(MappingInterruption, AStopBetweenScansKeepsTheScansMatchedSoFar) {

@@ -137,6 +137,21 @@ void LoopClosing::doubt_misclosure(SurveyState& state, const LoopClosure& loop) 
   state.judged(loop.to, std::move(health));
 }
 
+std::optional<Pose> LoopClosing::agreeing(const Pose& matched, const Pose& start, LoopClosure& loop,
+                                          bool& converged) const {
+  const double most = settings_.loops.max_misclosure_fraction;
+  const Pose moved = rigid_inverse(start) * matched;
+  if (!(most > 0.0) || !(translation_norm(moved) > most * loop.path_cm)) return matched;
+  char text[300];
+  std::snprintf(text, sizeof text,
+                "the match moved it %.0f cm / %.1f deg from where the loops closed before put it, more than %.2g %% "
+                "of the %.0f m of drive between (a corridor's walls fit as well metres along it)",
+                translation_norm(moved), rotation_angle_deg(moved), 100.0 * most, loop.path_cm / 100.0);
+  loop.doubt = text;
+  converged = true;
+  return std::nullopt;
+}
+
 void LoopClosing::doubt_unclosed_return(SurveyState& state, const LoopClosure& loop) const {
   RegistrationHealth health = state.health(loop.to);
   if (!health.judged || health.doubtful()) return;
@@ -188,6 +203,7 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, RunControl& cont
   for (std::size_t first = 0; first < n;) {
     const Return found = next_return(state, guess, driven, first);
     first = found.end;
+    control.report(first, "loop matches");
     std::optional<LoopClosure> unclosed;
     for (const Candidate& candidate : found.candidates) {
       if (control.stop_requested()) return loops;
@@ -197,11 +213,12 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, RunControl& cont
       loop.path_cm = driven[loop.to] - driven[loop.from];
       // The match starts where the guess puts `to` against `from` (in the state's frame, where
       // `from`'s model stands); the chain's own pose while no loop has moved one of them.
-      const Pose start = guess[loop.from] == poses[loop.from] && guess[loop.to] == poses[loop.to]
-                             ? poses[loop.to]
-                             : Pose(poses[loop.from] * rigid_inverse(guess[loop.from]) * guess[loop.to]);
+      const bool carried = guess[loop.from] != poses[loop.from] || guess[loop.to] != poses[loop.to];
+      const Pose start = carried ? Pose(poses[loop.from] * rigid_inverse(guess[loop.from]) * guess[loop.to])
+                                 : poses[loop.to];
       bool converged = false;
-      const std::optional<Pose> matched = loop_match(state, loop.from, loop.to, start, loop.doubt, converged);
+      std::optional<Pose> matched = loop_match(state, loop.from, loop.to, start, loop.doubt, converged);
+      if (matched && carried) matched = agreeing(*matched, start, loop, converged);
       if (!matched && converged && !unclosed) unclosed = loop;
       if (matched) {
         loop.closed = true;

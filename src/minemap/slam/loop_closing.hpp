@@ -65,6 +65,12 @@ class LoopClosing {
   /// says why. `converged`: some bound's match converged and was judged doubtful (not: no overlap).
   std::optional<Pose> loop_match(const SurveyState& state, std::size_t i, std::size_t j, const Pose& start,
                                  std::string& doubt, bool& converged) const;
+  /// A loop match of a return whose scans an earlier loop moved (`start`: where that put `loop.to`):
+  /// kept only when it moves the scan at most loops.max_misclosure_fraction of the loop's drive from
+  /// there. Such a start has been measured already, so a match far from it is a look-alike place (a
+  /// patrol's 14th lap once took one 7 m / 6 deg along, and carried every later lap with it);
+  /// otherwise empty, with `loop.doubt` saying so and `converged` set.
+  std::optional<Pose> agreeing(const Pose& matched, const Pose& start, LoopClosure& loop, bool& converged) const;
   /// A return none of whose candidates closed, where a match converged but was not trusted: the
   /// map's drift over the loop stays, unmeasured; the return's scan is judged doubtful.
   void doubt_unclosed_return(SurveyState& state, const LoopClosure& loop) const;
