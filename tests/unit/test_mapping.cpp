@@ -6,12 +6,14 @@
 #include <algorithm>
 #include <cstdlib>
 #include <fstream>
+#include <random>
 
 #include "minemap/backend/cpu_backend.hpp"
 #include "minemap/io/formats.hpp"
 #include "minemap/registration/icp.hpp"
 #include "minemap/sim/mine_simulator.hpp"
 #include "minemap/sim/moving_lidar.hpp"
+#include "minemap/slam/loop_closing.hpp"
 #include "minemap/slam/survey_matching.hpp"
 #include "minemap/slam/survey_state.hpp"
 #include "test_support.hpp"
@@ -143,6 +145,44 @@ TEST(MappingLoops, ALoopSurveyIsClosedAndItsEndsAgree) {
   EXPECT_LT(end_error(closed), end_error(open));
   EXPECT_LT(closed_errors.mean_translation_cm, open_errors.mean_translation_cm);
   EXPECT_LE(closed_errors.mean_translation_cm, 0.001 * closed_errors.path_length_cm);
+}
+
+// Each closed loop of a patrol carries the guesses of every later scan (LoopClosing::carry), and
+// the next loop's move is computed from guesses earlier moves placed. Sixty laps, a loop each, as a
+// 6 000-scan patrol closes them: every guess stays a rigid motion, and each loop's pair stands as
+// its match found it. (A move computed as it stood before 2026-12-05 compounded round-off loop after
+// loop: a 2 000-scan patrol's rotations were scaled by 30 % after 60 loops.)
+TEST(MappingLoops, LoopAfterLoopTheCarriedGuessesStayRigid) {
+  constexpr std::size_t kLaps = 60, kScansPerLap = 100;
+  constexpr double kPi = 3.14159265358979323846;
+  std::mt19937 random(28);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  // A 400 m circle, a little tilted and rolled, each lap a little off the one before (cm).
+  std::vector<Pose> guess((kLaps + 1) * kScansPerLap);
+  for (std::size_t k = 0; k < guess.size(); ++k) {
+    const double heading = 2.0 * kPi * double(k % kScansPerLap) / double(kScansPerLap);
+    Pose pose = Pose::Identity();
+    pose.block<3, 3>(0, 0) = (Eigen::AngleAxisd(heading + 0.01 * noise(random), Eigen::Vector3d::UnitY()) *
+                              Eigen::AngleAxisd(0.02 * noise(random), Eigen::Vector3d::UnitX()) *
+                              Eigen::AngleAxisd(0.02 * noise(random), Eigen::Vector3d::UnitZ()))
+                                 .toRotationMatrix();
+    pose.block<3, 1>(0, 3) = Eigen::Vector3d(6366.0 * std::cos(heading), 30.0 * double(k / kScansPerLap),
+                                             6366.0 * std::sin(heading)) + 20.0 * Eigen::Vector3d::Random();
+    guess[k] = pose;
+  }
+  for (std::size_t lap = 1; lap <= kLaps; ++lap) {
+    const std::size_t from = (lap - 1) * kScansPerLap + 37, to = lap * kScansPerLap + 37 + lap % 3;
+    Pose from_to = Pose::Identity();  // a match: near the place `from` stands, a little turned
+    from_to.block<3, 3>(0, 0) = Eigen::AngleAxisd(0.01 * noise(random), Eigen::Vector3d::UnitY()).toRotationMatrix();
+    from_to.block<3, 1>(0, 3) = Eigen::Vector3d(30.0 * noise(random), 5.0 * noise(random), 30.0 * noise(random));
+    detail::LoopClosing::carry(guess, from, to, from_to);
+    const Pose stands = rigid_inverse(guess[from]) * guess[to];
+    EXPECT_LT(translation_norm(rigid_inverse(from_to) * stands), 1e-6) << "lap " << lap;
+    EXPECT_LT(rotation_angle_deg(rigid_inverse(from_to) * stands), 1e-6) << "lap " << lap;
+  }
+  for (std::size_t k = 0; k < guess.size(); ++k) {
+    ASSERT_TRUE(is_valid_rigid(guess[k], 1e-9)) << "scan " << k << ": det " << guess[k].block<3, 3>(0, 0).determinant();
+  }
 }
 
 // A patrol: four laps of a 120 m loop. From its second lap on every scan is near an earlier one, one

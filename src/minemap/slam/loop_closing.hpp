@@ -45,6 +45,10 @@ class LoopClosing {
   /// pose graph's first edges (and the whole graph of a survey with no loop). `control`: where its
   /// progress goes ("pose graph").
   std::vector<PoseGraphEdge> chain(SurveyState& state, const RunControl& control) const;
+  /// Step 2's carry after a closed loop: moves `guess[to]` and every later guess rigidly, so that
+  /// `to` stands at `from_to` from `from`. The move is a rigid motion however many loops came before
+  /// (its rotation part orthonormalised). Guesses only: the scans' poses move in the relaxation.
+  static void carry(std::vector<Pose>& guess, std::size_t from, std::size_t to, const Pose& from_to);
 
  private:
   struct Candidate {
@@ -67,9 +71,9 @@ class LoopClosing {
                                  std::string& doubt, bool& converged) const;
   /// A loop match of a return whose scans an earlier loop moved (`start`: where that put `loop.to`):
   /// kept only when it moves the scan at most loops.max_misclosure_fraction of the loop's drive from
-  /// there. Such a start has been measured already, so a match far from it is a look-alike place (a
-  /// patrol's 14th lap once took one 7 m / 6 deg along, and carried every later lap with it);
-  /// otherwise empty, with `loop.doubt` saying so and `converged` set.
+  /// there. Such a start has been measured already, so a match far from it is a look-alike place or
+  /// a wrong start, and one carried edge would take every later lap with it; otherwise empty, with
+  /// `loop.doubt` saying so and `converged` set.
   std::optional<Pose> agreeing(const Pose& matched, const Pose& start, LoopClosure& loop, bool& converged) const;
   /// A return none of whose candidates closed, where a match converged but was not trusted: the
   /// map's drift over the loop stays, unmeasured; the return's scan is judged doubtful.
