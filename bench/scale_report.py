@@ -28,7 +28,9 @@ def summarise(tag, report_path, time_path):
     with open(report_path) as f:
         report = json.load(f)
     with open(time_path) as f:
-        wall_s, peak_kb = f.read().split()[:2]
+        # GNU time's "%e %M" line; a run that exited non-zero (13: doubtful scans) has
+        # "Command exited with non-zero status N" on the line before it.
+        wall_s, peak_kb = f.read().strip().splitlines()[-1].split()[:2]
     timings = report["timings_s"]
     per_scan = timings.get("per_scan", [])
     memory = report.get("memory_mb", {}).get("per_scan", [])
@@ -118,7 +120,7 @@ def table(runs):
              "| peak RSS | RSS at 1/4, end of matching | spilled | mean error |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in runs:
-        error = f'{r["mean_error_percent"]:.2f} % of the path' if r["mean_error_percent"] is not None else "-"
+        error = f'{r["mean_error_percent"]:.3f} % of the path' if r["mean_error_percent"] is not None else "-"
         quarter = f'{r["rss_at_quarter_mb"]:.0f} / {r["rss_at_end_mb"]:.0f} MB' if r["memory_mb"] else "-"
         loops = f'{r["loop_closure_s"]:.1f} s ({r["loops_closed"]}/{r["loops_tried"]} closed)'
         spilled = f'{r["spilled_mb"]:.0f} MB' if r["spilled_mb"] is not None else "-"
