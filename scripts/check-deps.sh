@@ -68,7 +68,10 @@ done
   find "$build_dir" -name link.txt -print0 | while IFS= read -r -d '' linkfile; do
     tr ' ' '\n' < "$linkfile" | { grep -E '^/.*\.(so(\.[0-9.]+)?|a)$' || true; } | sed "s|\$|	${linkfile%/link.txt}/|"
   done
+  # A *_DIR that is not there (MINEMAP_SHARED_DATA_DIR where the checkout has no ../shared) holds no
+  # package file: skipped, not an error under pipefail.
   sed -n 's/^[A-Za-z0-9_]*_DIR:PATH=\(\/.*\)$/\1/p' "$build_dir/CMakeCache.txt" | while read -r dir; do
+    [ -d "$dir" ] || continue
     find "$dir" -maxdepth 1 \( -name '*Config.cmake' -o -name '*-config.cmake' \) 2>/dev/null | sed "s|\$|	cmake-package/|"
   done
 } | { grep -v -e "^$repo_root/" -e "^$build_dir/" || true; } | sort -u > "$work/used"
