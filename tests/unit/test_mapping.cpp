@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <fstream>
+#include <numbers>
 #include <random>
 
 #include "minemap/backend/cpu_backend.hpp"
@@ -154,20 +155,20 @@ TEST(MappingLoops, ALoopSurveyIsClosedAndItsEndsAgree) {
 // loop: a 2 000-scan patrol's rotations were scaled by 30 % after 60 loops.)
 TEST(MappingLoops, LoopAfterLoopTheCarriedGuessesStayRigid) {
   constexpr std::size_t kLaps = 60, kScansPerLap = 100;
-  constexpr double kPi = 3.14159265358979323846;
   std::mt19937 random(28);
   std::normal_distribution<double> noise(0.0, 1.0);
   // A 400 m circle, a little tilted and rolled, each lap a little off the one before (cm).
   std::vector<Pose> guess((kLaps + 1) * kScansPerLap);
   for (std::size_t k = 0; k < guess.size(); ++k) {
-    const double heading = 2.0 * kPi * double(k % kScansPerLap) / double(kScansPerLap);
+    const double heading = 2.0 * std::numbers::pi * double(k % kScansPerLap) / double(kScansPerLap);
     Pose pose = Pose::Identity();
     pose.block<3, 3>(0, 0) = (Eigen::AngleAxisd(heading + 0.01 * noise(random), Eigen::Vector3d::UnitY()) *
                               Eigen::AngleAxisd(0.02 * noise(random), Eigen::Vector3d::UnitX()) *
                               Eigen::AngleAxisd(0.02 * noise(random), Eigen::Vector3d::UnitZ()))
                                  .toRotationMatrix();
     pose.block<3, 1>(0, 3) = Eigen::Vector3d(6366.0 * std::cos(heading), 30.0 * double(k / kScansPerLap),
-                                             6366.0 * std::sin(heading)) + 20.0 * Eigen::Vector3d::Random();
+                                             6366.0 * std::sin(heading)) +
+                             20.0 * Eigen::Vector3d(noise(random), noise(random), noise(random));
     guess[k] = pose;
   }
   for (std::size_t lap = 1; lap <= kLaps; ++lap) {
