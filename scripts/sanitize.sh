@@ -1,9 +1,15 @@
 #!/usr/bin/env bash
 # Runs the CTest suite (unit tests, the OpenCL ones on PoCL, CLI tests, fuzz corpus replays, the
-# install test) under sanitizers, one build folder per sanitizer, clang, RelWithDebInfo (-O2 -g),
+# install test) under sanitizers, one build folder per sanitizer, clang, RelWithDebInfo (-O2, line tables),
 # library + CLI + tests only (no benchmarks, no libFuzzer targets):
 #   address  build-asan  -fsanitize=address,undefined, LeakSanitizer on, UBSan halts on error
-#   thread   build-tsan  -fsanitize=thread, against a TSan-instrumented oneTBB (see below)
+#   thread   build-tsan  -fsanitize=thread, against a TSan-instrumented oneTBB (see below), and
+#                        -march=native (MINEMAP_NATIVE): FMA is on offer there, and the
+#                        backend-agreement tests (MappingBackends.*, Presets/MappingBackendsAgree.*,
+#                        Determinism.*, SearchBackends.*, SliceFilterBackends.*) prove that the
+#                        library's -ffp-contract=off keeps the CPU's poses the OpenCL kernels' bit
+#                        for bit. (Until 2026-12-05 a separate gcc -march=native build of four test
+#                        programs did that in scripts/test.sh: 3.6 of its 34.5 minutes.)
 # Every sanitizer report from any process (the minemap CLI run by the tests included) goes to a
 # file under <build>/sanitizer-reports/; the run fails if one exists, even when the test that caused
 # it passed, and prints it.
@@ -33,7 +39,11 @@
 # in Cli.WatchEndsAsMapOfTheSameFolderAndResumes), Cli.UnmarkedUosFilesGetTheirSlicesFromTheScanner-
 # Order (slice detection: UosPoints.UnmarkedScannerOrderedFilesGetTheirSlicesBack), install_and_find_package (packaging, no memory or
 # thread question); under TSan only, BadInput.MapCommandGivesEachCase... (single-threaded parsers
-# run through the CLI; ASan runs it).
+# run through the CLI; ASan runs it), and three more that ASan runs whose threads TSan sees in smaller
+# tests (2026-12-05, 30-36 s each under TSan): GlobalRegistration.FindsEachKittiStep... (the parallel
+# FPFH and RANSAC run in GlobalRegistration.AScanOfAnotherPlaceIsNotFound), ControlTie.RefusesTooFew...
+# (a 63-scan mapping, then single-threaded refusals) and Cli.AWideBoundOfTheUsersOwn... (the Jinchuan
+# pair mapped twice; once in MappingBackends.RealMineScansGiveTheSamePosesOnBothBackends).
 # Recovery.* and Cli.ScansOutOfReachAreRecoveredOrConfirmedAndSaySo (mappings with FPFH recovery,
 # 2-12 s in Release) stay out too: the recovery path
 # runs here in HealthRealData.ALidarPairOutOfTheBoundsReachIsDoubtfulThenRightFromAWiderBound, and
@@ -81,7 +91,7 @@ timeout="${SANITIZE_TIMEOUT:-900}"
 supp="$repo_root/tests/sanitizers"
 heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBoundOrRight|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.APatrolsLapsAreTiedTogetherEveryHundredMetres|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|MovingMapping\.TheDeskewKeepsAWeavingSensorsMapFiveTimesCloser|LiveMapper\..*|Recovery\..*|Cli\.ScansOutOfReachAreRecoveredOrConfirmedAndSaySo|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package|ControlTie\.AStraightDriveTiedToItsStationsLandsInTheGrid|ControlTie\.ABlunderIsNamedAndLeftOut|ControlTie\.TargetsOnTheRibsTieTheMapToo)$'
 # TSan only: runs of the single-threaded parsers through the CLI (ASan checks them).
-heavy_thread='^(BadInput\.MapCommandGivesEachCaseItsExitCodeAndLeavesTheOutputFolder)$'
+heavy_thread='^(BadInput\.MapCommandGivesEachCaseItsExitCodeAndLeavesTheOutputFolder|GlobalRegistration\.FindsEachKittiStepWithoutAStartAndTheSameTwice|ControlTie\.RefusesTooFewPointsOrPointsInALine|Cli\.AWideBoundOfTheUsersOwnIsRetriedAsTheDefaultIs)$'
 
 # Builds oneTBB with -fsanitize=thread into $1/install once; prints its TBB_DIR.
 tsan_tbb() {
@@ -143,7 +153,13 @@ sanitizer_environment() {
     export LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0"
     export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1:log_path=$reports/asan-ubsan"
   else
-    export TSAN_OPTIONS="halt_on_error=0:second_deadlock_stack=1:log_path=$reports/tsan"
+    # atexit_sleep_ms: TSan's main thread sleeps 1 000 ms by default before exiting, to let threads
+    # still running race with the exit. Every test process that ever started a thread (TBB's workers,
+    # PoCL's) paid that second, and each minemap CLI the tests run paid it again: about 300 of the
+    # 700 s the TSan tests cost (2026-12-05, e.g. Survey.UosNumberingGaps... 1.12 s -> 0.06 s).
+    # minemap returns from main with its own work joined and TBB's workers parked; 100 ms still
+    # gives a straggler the chance to show itself.
+    export TSAN_OPTIONS="halt_on_error=0:second_deadlock_stack=1:atexit_sleep_ms=100:log_path=$reports/tsan"
   fi
 }
 
@@ -160,20 +176,23 @@ rerun_failed_tests() {
 
 run_one() {
   local sanitizer="$1"; shift
-  local build_dir flags cxx_flags="" tbb_args=()
+  local build_dir flags cxx_flags="" tbb_args=() native=OFF
   local start=$SECONDS
   case "$sanitizer" in
     address) build_dir=build-asan; flags=address,undefined
              cxx_flags="-fsanitize-ignorelist=$supp/ubsan-ignorelist.txt" ;;
-    thread)  build_dir=build-tsan; flags=thread
+    thread)  build_dir=build-tsan; flags=thread; native=ON
              echo "== $build_dir: oneTBB with -fsanitize=thread"
              local tbb_dir; tbb_dir="$(tsan_tbb "$repo_root/$build_dir/onetbb")" || return 1
              tbb_args=(-DTBB_DIR="$tbb_dir") ;;
   esac
   echo "== $build_dir: $cxx -fsanitize=$flags"
   mkdir -p "$build_dir"
+  # -gline-tables-only (not -g): the reports' stacks keep every file, line and inlined frame, and the
+  # builds take ~15 % less time (test_mapping.cpp under ASan: 15.4 -> 12.9 s); no debugger uses them.
   cmake -S . -B "$build_dir" -DCMAKE_CXX_COMPILER="$cxx" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-    -DMINEMAP_SANITIZE="$flags" -DCMAKE_CXX_FLAGS="$cxx_flags" "${tbb_args[@]}" \
+    -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -gline-tables-only -DNDEBUG" \
+    -DMINEMAP_SANITIZE="$flags" -DMINEMAP_NATIVE="$native" -DCMAKE_CXX_FLAGS="$cxx_flags" "${tbb_args[@]}" \
     -DMINEMAP_BUILD_TESTS=ON -DMINEMAP_BUILD_BENCH=OFF -DMINEMAP_BUILD_FUZZ=OFF > "$build_dir/configure.log" 2>&1 ||
     { cat "$build_dir/configure.log" >&2; return 1; }
   cmake --build "$build_dir" -j "$jobs"

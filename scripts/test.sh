@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Builds minemap and runs every test: a check that the build used only packages install-deps.sh
 # installs (scripts/check-deps.sh), the unit tests (OpenCL ones on PoCL, failing when no OpenCL
-# platform is found), the fuzz corpora, the backend-agreement tests again in a -march=native build,
-# the Python package (pip install . from the same build, into build/venv) and its pytest suite,
-# the unit tests again under ASan+UBSan and under TSan (scripts/sanitize.sh), and a short libFuzzer
+# platform is found), the fuzz corpora, the Python package (pip install . from the same build, into
+# build/venv) and its pytest suite, the unit tests again under ASan+UBSan and under TSan
+# (scripts/sanitize.sh; the TSan build is also the -march=native one, where the backend-agreement
+# tests prove that the CPU's poses stay the OpenCL kernels' with FMA on offer), and a short libFuzzer
 # run of every parser.
-# Usage: scripts/test.sh   (SANITIZERS=0 skips the sanitizer runs, FUZZ_SECONDS=0 the libFuzzer run,
-#                          NATIVE=0 the -march=native build of the backend-agreement tests)
+# Usage: scripts/test.sh   (SANITIZERS=0 skips the sanitizer runs and with them the -march=native
+#                          build, FUZZ_SECONDS=0 the libFuzzer run)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh test
@@ -37,15 +38,6 @@ stage "Python package: pip install . (into build/venv, from the same build), the
 CMAKE_GENERATOR="Unix Makefiles" build/venv/bin/pip install -q --no-build-isolation --no-deps \
   --config-settings=build-dir=build .
 (cd python/tests && MINEMAP_CLI="$PWD/../../build/minemap" ../../build/venv/bin/python -m pytest -q -p no:cacheprovider .)
-if [ "${NATIVE:-1}" != "0" ]; then
-  # -march=native offers FMA: the library is built with -ffp-contract=off so that the CPU's poses
-  # stay those of the OpenCL kernels (FP_CONTRACT OFF). The backend-agreement tests prove it there.
-  stage "native build (-march=native): CPU and OpenCL still agree bit for bit"
-  cmake -S . -B build-native -DCMAKE_BUILD_TYPE=Release -DMINEMAP_NATIVE=ON -DMINEMAP_BUILD_BENCH=OFF > /dev/null
-  cmake --build build-native -j"$jobs" --target test_search test_slice_filter test_mapping test_determinism
-  (cd build-native && ctest --output-on-failure -j"$jobs" --timeout 900 \
-     -R '^(Backends/SearchTest\..*|SearchBackends\..*|SliceFilterBackends\..*|MappingBackends\..*|Presets/MappingBackendsAgree\..*|MappingDeterminism\..*|Determinism\..*)$')
-fi
 fuzz_build_dir=build-fuzz
 if [ "${SANITIZERS:-1}" != "0" ]; then
   stage "unit tests under ASan+UBSan and TSan"
