@@ -14,5 +14,7 @@ endfunction()
 # 2026-12-05: a fuzz replay program (not native) freed a pointer that was a Pose's first double.
 function(minemap_set_fp_model target)
   target_compile_options(${target} PRIVATE -ffp-contract=off)
-  target_compile_options(${target} PUBLIC $<$<BOOL:${MINEMAP_NATIVE}>:-march=native>)
+  if(MINEMAP_NATIVE)  # a portable build exports no CPU option at all (install_and_find_package checks)
+    target_compile_options(${target} PUBLIC -march=native)
+  endif()
 endfunction()
