@@ -139,27 +139,28 @@ std::vector<std::size_t> nearest_visits(const std::vector<std::size_t>& near, st
 
 std::shared_ptr<const PreparedCloud> LocalMap::metascan(const SurveyState& state, std::size_t i, const Pose& standing,
                                                         const Pose& frame, const Pose& at, double grow_cm,
-                                                        Scope scope, double thin_cm) const {
-  const bool whole_map = scope == Scope::kWholeMap;
-  std::vector<std::size_t> near =
-      state.nearby(i, standing, whole_map ? state.size() : i, double(settings_.icp.max_pair_dist_cm));
-  if (settings_.loops.enabled && !whole_map) {  // recent scans only: a loop is the pose graph's to close
+                                                        double thin_cm) const {
+  std::vector<std::size_t> near = state.nearby(i, standing, i, double(settings_.icp.max_pair_dist_cm));
+  if (settings_.loops.enabled) {  // recent scans only: a loop is the pose graph's to close
     const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
     std::erase_if(near, [&](std::size_t j) { return j + gap < i; });
   }
-  if (whole_map) {
-    std::vector<std::size_t> at_place;  // the scans standing at i's place (a loop's candidate distance)
-    for (const std::size_t j : near) {
-      if ((state.pose(j).block<3, 1>(0, 3) - standing.block<3, 1>(0, 3)).norm() <= settings_.loops.max_distance_cm) {
-        at_place.push_back(j);
-      }
-    }
-    near = nearest_visits(near, i, at_place, static_cast<std::size_t>(settings_.loops.min_scan_gap),
-                          static_cast<std::size_t>(settings_.loops.judge_max_visits));
-    const std::size_t most = static_cast<std::size_t>(settings_.loops.judge_max_scans);
-    if (most > 0 && near.size() > most) near.resize(most);  // the nearest (nearby sorts them)
-  }
   return union_of(state, i, near, frame, at, grow_cm, thin_cm);
+}
+
+std::vector<std::size_t> LocalMap::judging_scans(const SurveyState& state, std::size_t i, const Pose& standing) const {
+  std::vector<std::size_t> near = state.nearby(i, standing, state.size(), double(settings_.icp.max_pair_dist_cm));
+  std::vector<std::size_t> at_place;  // the scans standing at i's place (a loop's candidate distance)
+  for (const std::size_t j : near) {
+    if ((state.pose(j).block<3, 1>(0, 3) - standing.block<3, 1>(0, 3)).norm() <= settings_.loops.max_distance_cm) {
+      at_place.push_back(j);
+    }
+  }
+  near = nearest_visits(near, i, at_place, static_cast<std::size_t>(settings_.loops.min_scan_gap),
+                        static_cast<std::size_t>(settings_.loops.judge_max_visits));
+  const std::size_t most = static_cast<std::size_t>(settings_.loops.judge_max_scans);
+  if (most > 0 && near.size() > most) near.resize(most);  // the nearest (nearby sorts them)
+  return near;
 }
 
 std::shared_ptr<const PreparedCloud> LocalMap::union_of(const SurveyState& state, std::size_t i,

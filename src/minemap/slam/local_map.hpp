@@ -42,21 +42,21 @@ std::vector<std::size_t> nearest_visits(const std::vector<std::size_t>& near, st
 
 class LocalMap {
  public:
-  /// Which scans a metascan takes: the registered ones before the scan (while matching; with loops
-  /// on, only the last loops.min_scan_gap, so a loop is the pose graph's to close), or the scans
-  /// near it, earlier or later, of loops.judge_max_visits visits, the nearest loops.judge_max_scans
-  /// (judging the finished map).
-  enum class Scope { kEarlier, kWholeMap };
-
   LocalMap(const MappingSettings& settings, ComputeBackend& backend) : settings_(settings), backend_(backend) {}
 
-  /// The metascan of scan i: the scans near it where it stands (`standing`, SurveyState::nearby),
-  /// in the frame `frame`, holding their model points within its box at `at` grown by `grow_cm`.
-  /// thin_cm > 0: at most one point in each cell of that size (the nearest scan's), as a moving
-  /// sensor's local map (MotionSettings::local_map_cell_cm).
+  /// The metascan of scan i: the registered scans before it near where it stands (`standing`,
+  /// SurveyState::nearby; with loops on, only the last loops.min_scan_gap, so a loop is the pose
+  /// graph's to close), in the frame `frame`, holding their model points within its box at `at`
+  /// grown by `grow_cm`. thin_cm > 0: at most one point in each cell of that size (the nearest
+  /// scan's), as a moving sensor's local map (MotionSettings::local_map_cell_cm).
   std::shared_ptr<const PreparedCloud> metascan(const SurveyState& state, std::size_t i, const Pose& standing,
-                                                const Pose& frame, const Pose& at, double grow_cm, Scope scope,
+                                                const Pose& frame, const Pose& at, double grow_cm,
                                                 double thin_cm = 0.0) const;
+
+  /// The scans scan i is judged against in the finished map: those near it where it stands,
+  /// earlier or later, of loops.judge_max_visits visits to its place, the nearest
+  /// loops.judge_max_scans; nearest first.
+  std::vector<std::size_t> judging_scans(const SurveyState& state, std::size_t i, const Pose& standing) const;
 
   /// One kd-tree, in the frame `frame`, of the model points of scans `near` that scan i can reach
   /// at `at`: inside its box grown by `grow_cm`. Concatenated in the order of `near`; thin_cm > 0

@@ -10,7 +10,7 @@ RecoveredStart Recovery::find(const SurveyState& state, std::size_t i) const {
   // The previous scan's local map, thinned as its sweep's own was (a sensor's origin is its frame's).
   const double thin_cm = scan.sweep_s > 0.0 ? settings_.motion.local_map_cell_cm : 0.0;
   const std::shared_ptr<const PreparedCloud> map = local_map_.metascan(
-      state, i, frame, frame, frame, settings_.recovery.reach_cm, LocalMap::Scope::kEarlier, thin_cm);
+      state, i, frame, frame, frame, settings_.recovery.reach_cm, thin_cm);
   const GlobalRegistrationSettings& global = settings_.recovery.global;
   const FeatureCloud model = describe_fpfh(map->points(), Eigen::Vector3f::Zero(), global.features);
   const FeatureCloud data = describe_fpfh(scan.cloud->points(), Eigen::Vector3f::Zero(), global.features);

@@ -179,7 +179,7 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, flo
     }
     const double grow_cm = double(bound_cm) + settings_.metascan_margin_cm;
     metascans.push_back(
-        local_map_.metascan(state_, i, standing, frame, start, grow_cm, LocalMap::Scope::kEarlier, thin_cm));
+        local_map_.metascan(state_, i, standing, frame, start, grow_cm, thin_cm));
     if (thin_cm > 0.0 && standing == start) last = {i, bound_cm, frame, start, metascans.back()};
     return std::vector<WorldModel>{{metascans.back().get(), frame}};
   }, start_bound_cm, convergence);
