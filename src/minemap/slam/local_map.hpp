@@ -5,7 +5,9 @@
 // only the model points the scan can reach (inside its box grown by a margin: in a tunnel the
 // nearby scans hold about ten times the points that lie there, docs/benchmarks.md), expressed in a
 // frame near the scan so its float coordinates stay small wherever the survey is. The relaxation's
-// union of neighbours (paper, IV.B step 3) is built by the same code.
+// union of neighbours (paper, IV.B step 3) is built by the same code. The judging after the loops,
+// one pass over a quarter of a scan's points, does not pay back such a build: it searches the
+// neighbours' own trees (judging_scans below; slam/loop_closing.cpp).
 //
 // Thread-safety: uses the backend, one thread at a time; assembles in parallel, deterministically.
 #include <memory>
