@@ -25,9 +25,11 @@ constexpr std::size_t kJudgingCloudsKept = 8;
 /// The model clouds the judging searches: each scan's model points with a kd-tree of their own, in
 /// the scan's frame, built the first time a judged scan needs it and let go of once the scans judged
 /// since have not needed it. Scans in a row are judged against nearly the same neighbours, so each
-/// judged scan builds the trees of the few that came into reach. The judged figures are distances
-/// only, and the exact search over a scan's own tree finds each probe point's nearest model point as
-/// a tree over their union would (docs/scaling.md, "Loops at scale"). One thread.
+/// judged scan builds the trees of the few that came into reach. The judge reads distances only, and
+/// the exact search over the neighbours' own trees finds each probe point's nearest model point as a
+/// tree over their union does, to the last bits of a float (each distance is taken in its
+/// neighbour's frame) and without the union's crop to the scan's box grown by the pair bound
+/// (docs/scaling.md, "Loops at scale"). One thread.
 class JudgingClouds {
  public:
   JudgingClouds(ComputeBackend& backend, const KdTreeSettings& tree) : backend_(backend), tree_(tree) {}
@@ -218,7 +220,7 @@ void LoopClosing::judge_again(SurveyState& state, const RunControl& control) con
   // (loops.judge_max_visits, judge_max_scans). A scan that looked doubtful against a few recent
   // scans (a corner that sees where the drive began) is then judged against the start too. Each
   // neighbour is searched with its own tree (JudgingClouds), not one tree over their union: the
-  // judge's one pass over a scan's probe points never paid back that build (70 % of the judging).
+  // judge's one pass over a scan's probe points never paid back that build (72 % of the judging).
   JudgingClouds clouds(backend_, settings_.tree);
   const std::shared_ptr<const PreparedCloud> nothing = backend_.prepare({}, settings_.tree);
   for (std::size_t k = 1; k < state.size() && !control.stop_requested(); ++k) {
