@@ -609,6 +609,35 @@ TEST(MappingBackends, RealMineScansGiveTheSamePosesOnBothBackends) {
                                                                << device.scans[1].pose_cm;
 }
 
+// The judging after a loop searches each neighbour's own tree (one launch per neighbour on the
+// device): the same health figures, bit for bit, on both backends, as the same poses.
+TEST(MappingBackends, ALoopIsJudgedAgainAlikeOnBothBackends) {
+  sim::SimulationSettings sim_settings;
+  sim_settings.mine.seed = 1;
+  sim_settings.mine.loop_length_cm = 8000.0;
+  const auto survey = sim::simulate_mine_survey(sim_settings);
+  CpuBackend cpu_backend;
+  const auto cpu = map_survey(survey.scans, MappingSettings{}, cpu_backend);
+  auto opencl = test::opencl_backend();  // throws without OpenCL: the test fails, never skips
+  const auto device = map_survey(survey.scans, MappingSettings{}, *opencl);
+  ASSERT_EQ(cpu.scans.size(), device.scans.size());
+  ASSERT_TRUE(std::any_of(cpu.loops.begin(), cpu.loops.end(), [](const LoopClosure& loop) { return loop.closed; }));
+  std::size_t judged_again = 0;
+  for (std::size_t i = 0; i < cpu.scans.size(); ++i) {
+    const RegistrationHealth& a = cpu.scans[i].health;
+    const RegistrationHealth& b = device.scans[i].health;
+    EXPECT_TRUE(cpu.scans[i].pose_cm == device.scans[i].pose_cm) << "scan " << i;
+    EXPECT_EQ(a.after_loop_closure, b.after_loop_closure) << "scan " << i;
+    EXPECT_EQ(a.rms_cm, b.rms_cm) << "scan " << i;
+    EXPECT_EQ(a.paired_fraction, b.paired_fraction) << "scan " << i;
+    EXPECT_EQ(a.beyond_bound_fraction, b.beyond_bound_fraction) << "scan " << i;
+    EXPECT_EQ(a.edge_fraction, b.edge_fraction) << "scan " << i;
+    EXPECT_EQ(a.doubt, b.doubt) << "scan " << i;
+    judged_again += a.after_loop_closure ? 1 : 0;
+  }
+  EXPECT_GE(judged_again, cpu.scans.size() / 2);
+}
+
 TEST(MappingBackends, AnOpenClFailureMidRunFallsBackToTheCpuPoses) {
   const auto survey = small_survey(4, 5);
   MappingSettings settings;
