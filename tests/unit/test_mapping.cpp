@@ -30,6 +30,14 @@ sim::SimulatedSurvey small_survey(int scans, std::uint32_t seed = 1) {
   return sim::simulate_mine_survey(settings);
 }
 
+/// The stop-and-go survey of `minemap simulate --loop 80` (seed 1): 17 scans, one 80 m loop.
+sim::SimulatedSurvey loop_survey_80m() {
+  sim::SimulationSettings settings;
+  settings.mine.seed = 1;
+  settings.mine.loop_length_cm = 8000.0;
+  return sim::simulate_mine_survey(settings);
+}
+
 using test::odometry_of;
 using test::poses_of;
 
@@ -292,10 +300,7 @@ TEST(MappingDeterminism, BitIdenticalPosesRunToRunAndForOneOrTwoThreads) {
 // and one beyond loops.max_misclosure_fraction makes its later scan doubtful: the chain was that
 // far off. The stop-and-go loop closes 0.06 % apart: trusted at the default 1 %, doubtful at 0.03 %.
 TEST(MappingLoops, AMisclosureBeyondTheLimitMakesTheLoopsScanDoubtful) {
-  sim::SimulationSettings sim_settings;
-  sim_settings.mine.seed = 1;
-  sim_settings.mine.loop_length_cm = 8000.0;
-  const auto survey = sim::simulate_mine_survey(sim_settings);
+  const auto survey = loop_survey_80m();
   CpuBackend cpu;
   MappingSettings settings;
   const auto mapped = map_survey(survey.scans, settings, cpu);
@@ -612,10 +617,7 @@ TEST(MappingBackends, RealMineScansGiveTheSamePosesOnBothBackends) {
 // The judging after a loop searches each neighbour's own tree (one launch per neighbour on the
 // device): the same health figures, bit for bit, on both backends, as the same poses.
 TEST(MappingBackends, ALoopIsJudgedAgainAlikeOnBothBackends) {
-  sim::SimulationSettings sim_settings;
-  sim_settings.mine.seed = 1;
-  sim_settings.mine.loop_length_cm = 8000.0;
-  const auto survey = sim::simulate_mine_survey(sim_settings);
+  const auto survey = loop_survey_80m();
   CpuBackend cpu_backend;
   const auto cpu = map_survey(survey.scans, MappingSettings{}, cpu_backend);
   auto opencl = test::opencl_backend();  // throws without OpenCL: the test fails, never skips
