@@ -374,7 +374,7 @@ void read_binary_vertices(BinaryCursor& cursor, const PlyHeader& header, detail:
   for (std::uint64_t i = 0; i < vertex.count; ++i) {
     std::array<double, 3> xyz{};
     std::array<std::uint64_t, 3> offsets{};
-    AttributeCollector attributes{header.attributes};
+    AttributeCollector attributes{header.attributes, {}, {}};
     const bool collect = builder.columns() != 0;
     walk_binary_instance(cursor, vertex, [&](std::size_t p, const char* bytes) {
       for (std::size_t axis = 0; axis < 3; ++axis) {
@@ -481,7 +481,7 @@ void read_ascii_data(LineReader& reader, const PlyHeader& header, detail::ScanBu
     }
     PointValues values;
     if (builder.columns() != 0) {
-      AttributeCollector attributes{header.attributes};
+      AttributeCollector attributes{header.attributes, {}, {}};
       for (std::size_t p = 0; p < vertex.properties.size(); ++p) {
         if (vertex.properties[p].is_list) continue;
         const std::string_view token = tokens[token_of_property[p]];
