@@ -267,13 +267,15 @@ def se3_exp(rho, omega):
 
 # ---- the run --------------------------------------------------------------------------------------
 
-def kiss_config(threads, deskew, max_range=None):
+def kiss_config(threads, deskew, max_range=None, voxel_size=None):
     """KISS-ICP's config as load_config(None) builds it, with the thread count and deskew set."""
     from kiss_icp.config.parser import KISSConfig
 
     config = KISSConfig()
     if max_range is not None:
         config.data.max_range = float(max_range)
+    if voxel_size is not None:
+        config.mapping.voxel_size = float(voxel_size)
     config.data.deskew = bool(deskew)
     config.registration.max_num_threads = int(threads)
     # load_config's two steps after reading the (absent) YAML file:
@@ -319,7 +321,7 @@ def run(args):
     first_points, first_times = load(scans[0][1])
     has_times = first_times is not None
     deskew = {"on": True, "off": False, "auto": has_times}[args.deskew]
-    config = kiss_config(args.threads, deskew, args.max_range)
+    config = kiss_config(args.threads, deskew, args.max_range, args.voxel_size)
     odometry = KissICP(config=config)
 
     poses_end, poses_mid, stamps, per_scan = [], [], [], []
@@ -396,6 +398,9 @@ def main():
                         help="KITTI scans: none (KISS-ICP's odometry loader) or azimuth times (its raw loader)")
     parser.add_argument("--no-kitti-correction", action="store_true", help="KITTI scans: skip _correct_kitti_scan")
     parser.add_argument("--max-range", type=float, help="data.max_range (m); voxel_size follows as max_range / 100")
+    parser.add_argument("--voxel-size", type=float,
+                        help="mapping.voxel_size (m) instead of max_range / 100: KISS-ICP's map and registration "
+                             "sampling (its frames are voxelised at 0.5x and 1.5x this), for its speed against accuracy")
     parser.add_argument("--scans-limit", type=int, default=0, help="only the first N scans")
     parser.add_argument("--quiet", action="store_true")
     parser.add_argument("--setup", action="store_true", help="only make the venv, then exit")
