@@ -211,6 +211,9 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
   number(g, "--provisional-step-factor", mapping.motion.provisional_step_factor,
          "A sweep's first match, before its deskew is refined, converges at this many times --min-step-cm/-deg "
          "(1 = as any match)");
+  flag(g, "--provisional-all-points", map.provisional_all_points,
+       "A sweep's first match, before its deskew is refined, matches all its points (the default matches the "
+       "health probe's, every --health-probe-stride-th)");
 }
 
 void MapOptionTable::declare_relaxation(MappingSettings& mapping) {
@@ -317,6 +320,7 @@ void finish_settings(MapCommand& command) {
   if (options.no_health_check) settings.health.enabled = false;
   if (options.no_retry) settings.retry_bound_factors.clear();
   if (options.no_recovery) settings.recovery.enabled = false;
+  if (options.provisional_all_points) settings.motion.provisional_probe = false;
   if (options.no_loops) settings.loops.enabled = false;
   if (options.loop_edges_alike) settings.loops.information_from_geometry = false;
   if (!options.control.empty()) settings.control.keep_graph = true;

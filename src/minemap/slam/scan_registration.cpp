@@ -11,9 +11,13 @@ RegistrationHealth ScanRegistration::judge(const PreparedScan& scan, const Pose&
                             scan.planes_or_null());
 }
 
+const PreparedCloud& ScanRegistration::data_of(const PreparedScan& scan, Convergence convergence) const {
+  return convergence == Convergence::kProvisional && settings_.motion.provisional_probe ? *scan.probe : *scan.cloud;
+}
+
 IcpSettings ScanRegistration::icp_for(const PreparedScan& scan, Convergence convergence) const {
   IcpSettings icp = icp_;
-  icp.termination.min_pairs = settings_.min_pairs_for(scan.cloud->points().size());
+  icp.termination.min_pairs = settings_.min_pairs_for(data_of(scan, convergence).points().size());
   if (convergence == Convergence::kProvisional) {
     icp.termination.min_translation_step_cm *= settings_.motion.provisional_step_factor;
     icp.termination.min_rotation_step_deg *= settings_.motion.provisional_step_factor;
@@ -29,14 +33,14 @@ WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, cons
   wide.max_pair_dist_cm = bound_cm;
   wide.refine_pair_dist_fraction = 0.0f;
   WideMatch match;
-  const IcpResult coarse = register_icp(backend_, *scan.cloud, start, models, wide);
+  const IcpResult coarse = register_icp(backend_, data_of(scan, convergence), start, models, wide);
   match.iterations += coarse.iterations();
   if (!coarse.ok()) {
     match.failure = to_string(coarse.stop);
     match.failed = coarse;
     return match;
   }
-  IcpResult fine = register_icp(backend_, *scan.cloud, coarse.world_from_data, models, icp);
+  IcpResult fine = register_icp(backend_, data_of(scan, convergence), coarse.world_from_data, models, icp);
   match.iterations += fine.iterations();
   if (!fine.ok()) {
     match.failure = to_string(fine.stop);
@@ -68,7 +72,7 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
     widest_cm = start_bound_cm;
   } else {
     const std::vector<WorldModel> models = models_for(icp_.max_pair_dist_cm, start);
-    match.first = register_icp(backend_, *scan.cloud, start, models, icp_for(scan, convergence));
+    match.first = register_icp(backend_, data_of(scan, convergence), start, models, icp_for(scan, convergence));
     match.iterations = match.first.iterations();
     if (!match.first.ok()) return match;
     match.health = judge(scan, match.first.world_from_data, start, models);

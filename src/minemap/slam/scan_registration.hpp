@@ -47,8 +47,10 @@ struct WideMatch {
 /// for the retries).
 using ModelsForBound = std::function<std::vector<WorldModel>(float bound_cm, const Pose& standing)>;
 
-/// How far a match converges: to ICP's least step (final), or to MotionSettings::
-/// provisional_step_factor times it (a sweep's first match, which tells its deskew the step).
+/// How far a match goes: to ICP's least step with all the scan's points (final), or provisionally
+/// (a sweep's first match, which tells its deskew the step): to MotionSettings::
+/// provisional_step_factor times that step, with the probe's points where MotionSettings::
+/// provisional_probe says so.
 enum class Convergence { kFinal, kProvisional };
 
 class ScanRegistration {
@@ -76,7 +78,9 @@ class ScanRegistration {
                            std::span<const WorldModel> models, float reach_bound_cm = 0.0f) const;
 
  private:
-  /// The ICP for `scan`: icp_, asking for no more pairs than the scan's size allows
+  /// The points a match of `scan` moves: all of them, or the probe's for a provisional match.
+  const PreparedCloud& data_of(const PreparedScan& scan, Convergence convergence) const;
+  /// The ICP for `scan`: icp_, asking for no more pairs than the points matched allow
   /// (MappingSettings::min_pairs_for), converging as asked.
   IcpSettings icp_for(const PreparedScan& scan, Convergence convergence) const;
 

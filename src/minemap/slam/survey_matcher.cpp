@@ -401,7 +401,7 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
   control_.timed(&StageTimes::pairwise_s, [&] {
     const Prediction prediction = motion_.predict(state_, i);
     // A sweep's first matches need only tell its deskew the step; the refinement matches again.
-    const Convergence convergence = raw != nullptr && settings_.motion.provisional_step_factor > 1.0
+    const Convergence convergence = raw != nullptr && settings_.motion.provisional()
                                         ? Convergence::kProvisional
                                         : Convergence::kFinal;
     ScanMatch match = match_from(i, prediction, convergence);
