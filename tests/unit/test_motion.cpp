@@ -301,5 +301,53 @@ TEST(MovingMapping, TheDeskewKeepsAWeavingSensorsMapFiveTimesCloser) {
   EXPECT_LT(1.5 * run.errors.mean_relative_translation_cm, skewed.errors.mean_relative_translation_cm);
 }
 
+// A hand-held sequence with sweeps missing, read as keyframes (no deskew, as a LIO front end saves
+// them): the sweep after the gap ends far from the constant-velocity prediction, many times the
+// recent predictions' error. Such a jump is not trusted on its point statistics alone (on a real
+// building walk a wide first match slid 3 m along a corridor there, passed every health test, and
+// the next prediction repeated the slide: docs/benchmarks.md, "Real moving sequences"): a second
+// match from an independent start must end at the same pose, or the scan is doubtful.
+TEST(MovingMapping, AJumpFromThePredictionIsTrustedOnlyWhenASecondStartAgrees) {
+  sim::MovingSimulationSettings simulation;
+  simulation.sensor = sim::MovingSensor::kHandheld;
+  simulation.sweeps = 60;
+  simulation.mine.seed = 2;
+  const sim::MovingSurvey whole = sim::simulate_moving_survey(simulation);
+  const auto without = [&](std::size_t first, std::size_t count) {
+    sim::MovingSurvey survey = whole;
+    survey.scans.erase(survey.scans.begin() + first, survey.scans.begin() + first + count);
+    survey.truth_cm.erase(survey.truth_cm.begin() + first, survey.truth_cm.begin() + first + count);
+    return survey;
+  };
+  MappingSettings settings;
+  settings.motion.deskew = DeskewMode::kOff;
+  CpuBackend cpu;
+  // Three sweeps missing: the features put the scan where its match did. Trusted, and said.
+  const sim::MovingSurvey gap = without(30, 3);
+  const MappingResult result = map_survey(gap.scans, settings, cpu);
+  const RegistrationHealth& jump = result.scans[30].health;
+  std::printf("three missing: %.1f cm from the prediction; note: %s; doubt: %s\n", jump.correction_cm,
+              jump.note.c_str(), jump.doubt.c_str());
+  EXPECT_GT(jump.correction_cm, 30.0);
+  EXPECT_NE(jump.note.find("from the prediction"), std::string::npos) << jump.note;
+  EXPECT_NE(jump.note.find("confirmed"), std::string::npos) << jump.note;
+  EXPECT_TRUE(result.doubtful().empty());
+  EXPECT_LT(pose_errors(test::poses_of(result), gap.truth_cm).max_translation_cm, 30.0);
+  // The rule off (no jump is ever far enough): the same pose, nothing said.
+  MappingSettings unchecked = settings;
+  unchecked.motion.confirm_sigmas = 1e9;
+  const MappingResult plain = map_survey(gap.scans, unchecked, cpu);
+  EXPECT_TRUE(plain.scans[30].health.note.empty());
+  EXPECT_EQ(plain.scans[30].pose_cm, result.scans[30].pose_cm);
+  // Four missing: the features find no start, and standing still lies within the match's reach of
+  // the prediction (not independent). Right, but not confirmed: doubtful, and named.
+  const sim::MovingSurvey wider = without(30, 4);
+  const MappingResult unconfirmed = map_survey(wider.scans, settings, cpu);
+  const RegistrationHealth& alone = unconfirmed.scans[30].health;
+  std::printf("four missing: %.1f cm from the prediction; doubt: %s\n", alone.correction_cm, alone.doubt.c_str());
+  EXPECT_EQ(unconfirmed.doubtful(), (std::vector<std::size_t>{30}));
+  EXPECT_NE(alone.doubt.find("no independent start confirmed it"), std::string::npos) << alone.doubt;
+}
+
 }  // namespace
 }  // namespace minemap

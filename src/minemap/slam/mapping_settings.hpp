@@ -114,7 +114,11 @@ struct MotionSettings {
   /// the recent prediction errors (with at least confirm_min_history of them) is not trusted on its
   /// point statistics alone: a second match from the other model's start (standing still, or the
   /// odometry) must end within confirm_agree_cm / _deg of it, or it is doubtful. A 4 m retry can
-  /// settle a corridor's surfaces onto each other metres from the truth and look perfect.
+  /// settle a corridor's surfaces onto each other metres from the truth and look perfect. So is a
+  /// constant-velocity match (no retry) that moved the sensor itself more than this many times the
+  /// RMS of the recent matches' translation from their predictions (and more than the pair bound):
+  /// a wide first match slides along a corridor as a retry does; when the second match disagrees
+  /// and ends within that jump of the prediction, it is kept instead.
   double confirm_sigmas = 6.0;
   int confirm_min_history = 3;
   double confirm_agree_cm = 5.0;

@@ -47,7 +47,7 @@ Prediction MotionPrediction::predict(const SurveyState& state, std::size_t i) co
 }
 
 PredictionError MotionPrediction::recent_error(const SurveyState& state, std::size_t i) const {
-  double sum_squares = 0.0;
+  double sum_squares = 0.0, translation_squares = 0.0;
   PredictionError error;
   const std::size_t window = static_cast<std::size_t>(settings_.motion.adaptive_bound_window);
   for (std::size_t j = i > window ? i - window : 1; j < i; ++j) {
@@ -57,9 +57,13 @@ PredictionError MotionPrediction::recent_error(const SurveyState& state, std::si
     const RegistrationHealth& health = state.health(j);
     if (!health.judged || health.doubtful()) continue;
     sum_squares += health.moved_cm * health.moved_cm;
+    translation_squares += health.correction_cm * health.correction_cm;
     ++error.count;
   }
-  if (error.count > 0) error.rms_cm = std::sqrt(sum_squares / error.count);
+  if (error.count > 0) {
+    error.rms_cm = std::sqrt(sum_squares / error.count);
+    error.translation_rms_cm = std::sqrt(translation_squares / error.count);
+  }
   return error;
 }
 

@@ -22,7 +22,8 @@ namespace minemap::detail {
 /// each predicted start to its trusted match (RegistrationHealth::moved_cm), over the last
 /// adaptive_bound_window scans.
 struct PredictionError {
-  double rms_cm = 0.0;
+  double rms_cm = 0.0;              ///< RMS of the points' displacement, prediction to match
+  double translation_rms_cm = 0.0;  ///< RMS of the sensor's own displacement (the correction's translation)
   int count = 0;  ///< trusted matches it is taken over (0: no history yet)
 };
 

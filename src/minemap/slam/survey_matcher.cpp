@@ -204,11 +204,19 @@ void SurveyMatcher::place(std::size_t i, const ScanMatch& match, const Pose& sta
 void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& prediction, ScanMatch& match,
                                       Convergence convergence) {
   const MotionSettings& motion = settings_.motion;
-  if (!match.ok() || !match.retry || match.health.doubtful()) return;
+  if (!match.ok() || match.health.doubtful()) return;
   const PredictionError recent = motion_.recent_error(state_, i);
   if (recent.count < motion.confirm_min_history) return;
-  const double far_cm = std::max<double>(motion.confirm_sigmas * recent.rms_cm, settings_.icp.max_pair_dist_cm);
-  if (!(match.health.moved_cm > far_cm)) return;
+  const double bound_cm = settings_.icp.max_pair_dist_cm;
+  const double far_cm = std::max<double>(motion.confirm_sigmas * recent.rms_cm, bound_cm);
+  const bool far_retry = match.retry && match.health.moved_cm > far_cm;
+  // A constant-velocity match whose sensor ended far from where the motion had it go: a wide first
+  // match (the adaptive bound) slides along a corridor as a retry does (a real building walk: 3 m
+  // where the true step was 10 cm, trusted), and the next prediction repeats the slide.
+  const double jump_cm = std::max<double>(motion.confirm_sigmas * recent.translation_rms_cm, bound_cm);
+  const bool jumped = !far_retry && prediction.constant_velocity && match.health.correction_cm > jump_cm;
+  if (!far_retry && !jumped) return;
+  const float reach_cm = match.retry ? match.health.retry_bound_cm : prediction.start_bound_cm;
   // The second start: where the scan's features put it (independent of any motion model), in a
   // sequence without odometry where recovery is on and they find it; else the other model's.
   Prediction other;
@@ -219,53 +227,78 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
     other.start = features->start;
   } else {
     other.start = motion_.alternative_start(state_, i);
-    other.start_bound_cm = match.health.retry_bound_cm;
+    other.start_bound_cm = reach_cm;
   }
   char text[480];
+  char what[200];
+  if (far_retry) {
+    std::snprintf(what, sizeof what, "the %g cm retry moved its points %.0f cm, %.0f times the recent predictions' error (%.1f cm RMS)",
+                  double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
+                  recent.rms_cm);
+  } else {
+    std::snprintf(what, sizeof what, "the match moved the sensor %.0f cm from the prediction, %.0f times the recent predictions' (%.1f cm RMS)",
+                  match.health.correction_cm, match.health.correction_cm / std::max(recent.translation_rms_cm, 1e-3),
+                  recent.translation_rms_cm);
+  }
   const PreparedScan& scan = state_.prepared(i);
   const double starts_apart_cm = rms_moved_cm(*scan.probe, prediction.start, other.start);
-  if (!from_features && features != nullptr && starts_apart_cm < match.health.retry_bound_cm) {
-    // The other model's start lies within the retry's reach of the first: the two matches would
+  if (!from_features && features != nullptr && starts_apart_cm < reach_cm) {
+    // The other model's start lies within the match's reach of the first: the two matches would
     // fall into one basin, right or wrong (a lost track in a drive: both end metres short).
     std::snprintf(text, sizeof text,
-                  "the %g cm retry moved its points %.0f cm, %.0f times the recent predictions' error (%.1f cm RMS), "
-                  "and no independent start confirmed it: its FPFH features found none (%s), and standing still "
-                  "is %.0f cm from the prediction, within the retry's reach",
-                  double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
-                  recent.rms_cm, features->global.why_not.c_str(), starts_apart_cm);
+                  "%s, and no independent start confirmed it: its FPFH features found none (%s), and standing still "
+                  "is %.0f cm from the prediction, within the match's reach",
+                  what, features->global.why_not.c_str(), starts_apart_cm);
     features_said_ = true;
     keep_first_match(match, text);
     return;
   }
-  const ScanMatch second = match_from(i, other, convergence);
+  ScanMatch second = match_from(i, other, convergence);
   step1_iterations_ += second.iterations;
-  const Pose kept = match.retry->world_from_data;
+  const Pose kept = match.kept().world_from_data;
+  const char* second_start = from_features                          ? "where its FPFH features put it"
+                             : motion_.constant_velocity_at(state_, i) ? "standing still"
+                                                                       : "the odometry's start";
   if (second.ok() && !second.health.doubtful()) {
     const Pose found = second.kept().world_from_data;
     const Pose apart = rigid_inverse(kept) * found;
     if (translation_norm(apart) <= motion.confirm_agree_cm && rotation_angle_deg(apart) <= motion.confirm_agree_deg) {
-      return;  // two starts, one pose: confirmed
+      if (jumped) {  // two starts, one pose: confirmed (a jump says so in its note)
+        std::snprintf(text, sizeof text, "%s; a match from %s ended %.1f cm / %.2f deg from it: confirmed", what,
+                      second_start, translation_norm(apart), rotation_angle_deg(apart));
+        match.health.note = text;
+      }
+      return;
     }
-    std::snprintf(text, sizeof text,
-                  "the %g cm retry moved its points %.0f cm, %.0f times the recent predictions' error (%.1f cm RMS), "
-                  "and a second match from %s ended %.0f cm / %.1f deg from it: not confirmed",
-                  double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
-                  recent.rms_cm,
-                  from_features                          ? "where its FPFH features put it"
-                  : motion_.constant_velocity_at(state_, i) ? "the odometry's start"
-                                                            : "standing still",
-                  translation_norm(apart), rotation_angle_deg(apart));
+    const Pose correction = rigid_inverse(prediction.start) * found;
+    if (jumped && translation_norm(correction) <= jump_cm) {
+      // The second start's trusted match ends where the motion had the sensor go: kept, as any
+      // match is that the motion model agrees with; the jump is said in its note.
+      std::snprintf(text, sizeof text,
+                    "%s; a trusted match from %s ended %.0f cm from the prediction, %.0f cm / %.1f deg from the first: "
+                    "kept",
+                    what, second_start, translation_norm(correction), translation_norm(apart), rotation_angle_deg(apart));
+      second.health.correction_cm = translation_norm(correction);
+      second.health.correction_deg = rotation_angle_deg(correction);
+      second.health.moved_cm = rms_moved_cm(*scan.probe, prediction.start, found);
+      second.health.note = text;
+      match = std::move(second);
+      return;
+    }
+    std::snprintf(text, sizeof text, "%s, and a second match from %s ended %.0f cm / %.1f deg from it: not confirmed",
+                  what, second_start, translation_norm(apart), rotation_angle_deg(apart));
   } else {
-    std::snprintf(text, sizeof text,
-                  "the %g cm retry moved its points %.0f cm, %.0f times the recent predictions' error (%.1f cm RMS), "
-                  "and a second match from another start was not trusted: not confirmed",
-                  double(match.health.retry_bound_cm), match.health.moved_cm, match.health.moved_cm / recent.rms_cm,
-                  recent.rms_cm);
+    std::snprintf(text, sizeof text, "%s, and a second match from another start was not trusted: not confirmed", what);
   }
   keep_first_match(match, text);
 }
 
 void SurveyMatcher::keep_first_match(ScanMatch& match, const char* refuted) {
+  if (!match.retry) {  // the first match itself went far: doubtful where it stands
+    match.health.doubt = std::string("not confirmed (") + refuted + ")";
+    match.health.failed = HealthTest::kReach;
+    return;
+  }
   match.retry.reset();
   match.health = std::move(match.first_health);
   match.health.doubt += std::string(" (") + refuted + "; the scan stays where its first match put it)";

@@ -84,16 +84,19 @@ class SurveyMatcher {
   ScanMatch match_incremental(std::size_t i, const Pose& start, float start_bound_cm, Convergence convergence) const;
   ScanMatch match_from(std::size_t i, const Prediction& prediction,
                        Convergence convergence = Convergence::kFinal) const;
-  /// A retry that landed far from the prediction (MotionSettings::confirm_sigmas): matched again from
-  /// another start (where the scan's features put it, in a sequence without odometry; else the
-  /// other model's); kept only when both end at the same pose (not when the only other start lies
-  /// within the retry's reach of the prediction: not independent), else keep_first_match.
+  /// A retry that landed far from the prediction, or a constant-velocity match that moved the sensor
+  /// far from it (MotionSettings::confirm_sigmas): matched again from another start (where the
+  /// scan's features put it, in a sequence without odometry; else the other model's); kept only
+  /// when both end at the same pose (not when the only other start lies within the match's reach
+  /// of the prediction: not independent). Else a jump's second match is kept where it ends near the
+  /// prediction, trusted; otherwise keep_first_match.
   void confirm_far_match(std::size_t i, const Prediction& prediction, ScanMatch& match, Convergence convergence);
   /// A far retry that no second start confirmed is not kept: the scan stays where its first match
   /// put it, near a prediction that has been right lately, doubtful with that match's own doubt and
   /// the refuted retry (`refuted`) said after it. A corridor's walls fit as well metres along it: a
   /// 10-lap patrol kept such a retry's 4.8 m slip, and every lap after it stood 4.8 m off. A judging
-  /// against more of the map (after a loop) may answer the first match's doubt.
+  /// against more of the map (after a loop) may answer the first match's doubt. A first match that
+  /// jumped (no retry) stays where it is, doubtful (the reach test), with `refuted` said.
   static void keep_first_match(ScanMatch& match, const char* refuted);
   /// Scan i's match from the prediction failed or is doubtful (MappingSettings::recovery): it is
   /// registered again without a start and matched from there. Where both matches end at one pose
