@@ -12,7 +12,8 @@ Formats (T_world_sensor; translations in metres unless --unit says otherwise; '#
   TUM      "t x y z qx qy qz qw" per line
   KITTI    12 numbers per line, the 3x4 matrix [R | t] row-major
   graph    "vK x y z qx qy qz qw" per line (gtsam_points' graph.txt; ordered by K)
-  matrix   4x4 matrices, 4 rows of 4 numbers (blank lines between them optional), or 16 numbers a line
+  matrix   4x4 matrices, 4 rows of 4 numbers (blank lines between them optional), or 16 numbers a line;
+           commas as blanks; a bottom row 0 0 0 T with T > 1 holds the stamp T (BALM's alidarPose.csv)
 
 The errors (evo's definitions, https://github.com/MichaelGrupp/evo, metrics.py):
   ATE  the estimate is moved so that its first pose lands on the reference's first pose
@@ -170,11 +171,17 @@ def read_trajectory(path, unit="m", fmt=None):
         values = [float(x) for _, tokens in lines for x in tokens]
         if len(values) % 16:
             _fail(path, f"{len(values)} numbers: not a whole number of 4x4 matrices")
+        corner_stamps = []
         for i in range(len(values) // 16):
             pose = np.array(values[16 * i:16 * i + 16]).reshape(4, 4)
+            if not pose[3, :3].any() and pose[3, 3] > 1.0:
+                # BALM's alidarPose.csv (hku-mars/BALM, benchmark_realworld): the pose's unix stamp
+                # where the 1 goes.
+                corner_stamps.append(pose[3, 3])
+                pose[3, 3] = 1.0
             pose[:3, 3] *= scale
             poses.append(_rigid(pose, path, f"matrix {i}"))
-        stamps = None
+        stamps = corner_stamps if len(corner_stamps) == len(poses) else None
     else:
         raise ValueError(f"unknown format {fmt}")
     if not poses:
