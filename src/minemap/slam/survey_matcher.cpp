@@ -257,8 +257,8 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
   step1_iterations_ += second.iterations;
   const Pose kept = match.kept().world_from_data;
   const char* second_start = from_features                          ? "where its FPFH features put it"
-                             : motion_.constant_velocity_at(state_, i) ? "standing still"
-                                                                       : "the odometry's start";
+                             : motion_.constant_velocity_at(state_, i) ? "the odometry's start"
+                                                                       : "standing still";
   if (second.ok() && !second.health.doubtful()) {
     const Pose found = second.kept().world_from_data;
     const Pose apart = rigid_inverse(kept) * found;
