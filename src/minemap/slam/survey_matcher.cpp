@@ -420,6 +420,17 @@ void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTim
   again.health.correction_deg = first_health.correction_deg;
   again.health.moved_cm = first_health.moved_cm;
   again.health.retry_bound_cm = first_health.retry_bound_cm;
+  again.health.recovered_inliers = first_health.recovered_inliers;
+  // The refinement starts where the first match ended, so it cannot see how the match got there:
+  // a doubt about the move (it started out of reach, or a jump from the prediction that no second
+  // start confirmed: confirm_far_match) stands whatever the refined fit, and a note saying how a
+  // move was confirmed or recovered stays with the scan.
+  if (first_health.doubtful() && first_health.failed == HealthTest::kReach) {
+    again.health.doubt = first_health.doubt;
+    again.health.failed = first_health.failed;
+    again.health.out_of_reach = first_health.out_of_reach;
+  }
+  if (again.health.note.empty()) again.health.note = first_health.note;
   place(i, again, here.start);
 }
 
