@@ -340,10 +340,10 @@ TEST(MappingLoops, AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot) {
     misclosure |= closed.scans[k].health.doubt.find("the relaxation only spread it") != std::string::npos;
   }
   EXPECT_TRUE(misclosure);
-  // No loop match trusted: retries capped at 30 cm, and no recovery (which would move the scans
-  // that the narrow retries left doubtful, and with them the return).
-  settings.max_retry_bound_cm = 30.0f;
-  settings.recovery.enabled = false;
+  // No loop match trusted: loop matches at the pair bound only (the chain as above; a cap on every
+  // retry, 30 cm, once made it here, but then most sweeps start out of their matches' reach and
+  // are doubtful for that, the return among them).
+  settings.loops.bound_factors = {1.0f};
   const auto unclosed = map_survey(survey.scans, settings, cpu);
   for (const LoopClosure& loop : unclosed.loops) EXPECT_FALSE(loop.closed);
   bool unclosed_return = false;
