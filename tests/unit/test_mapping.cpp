@@ -14,6 +14,7 @@
 #include "minemap/registration/icp.hpp"
 #include "minemap/sim/mine_simulator.hpp"
 #include "minemap/sim/moving_lidar.hpp"
+#include "minemap/slam/local_map.hpp"
 #include "minemap/slam/loop_closing.hpp"
 #include "minemap/slam/survey_matching.hpp"
 #include "minemap/slam/survey_state.hpp"
@@ -523,6 +524,99 @@ TEST(MappingSimulatedMine, AScanLetGoOfGivesTheModelPointsItHeld) {
   ASSERT_GT(state.spilled_bytes(), 0u);
   for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(model_of(i), models[i]) << "let go of, scan " << i;
   EXPECT_EQ(state.prepared(0).model_cloud->point_vector(), models[0]);  // and taken back, the same
+}
+
+// The judging after the loops searches a block of 16 scans in a row, all among a scan's
+// neighbours, as one tree (JudgingClouds): each point's nearest model point is the one the
+// neighbours' own trees give (the distance to a float's last bits: taken in the block's frame), and
+// the brute force's; the judged scan's own block and a ragged end are searched scan by scan. On
+// the OpenCL device the same trees give the host's distances bit for bit.
+TEST(MappingJudging, BlocksOfScansInARowFindWhatEachScansOwnTreeFinds) {
+  CpuBackend cpu;
+  const MappingSettings settings;
+  const auto fill = [&](ComputeBackend& backend, detail::SurveyState& state) {
+    for (std::size_t i = 0; i < 40; ++i) {
+      Scan scan;
+      scan.name = "scan" + std::to_string(i);
+      scan.pose_cm.block<3, 3>(0, 0) = Eigen::AngleAxisd(0.01 * double(i), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+      scan.pose_cm.block<3, 1>(0, 3) = Eigen::Vector3d(50.0 * double(i), 3.0 * double(i), -1.0 * double(i));
+      detail::PreparedScan prepared;
+      prepared.cloud = backend.prepare(test::random_cloud(300, -500.f, 500.f, 700 + std::uint32_t(i)), settings.tree);
+      prepared.model_cloud = prepared.cloud;
+      prepared.probe = prepared.cloud;
+      state.add(scan, std::move(prepared));
+    }
+  };
+  detail::SurveyState state;
+  fill(cpu, state);
+  const std::size_t judged = 20;
+  std::vector<std::size_t> near;
+  for (std::size_t j = 0; j < state.size(); ++j) {
+    if (j != judged) near.push_back(j);
+  }
+  std::stable_sort(near.begin(), near.end(), [&](std::size_t a, std::size_t b) {
+    return (a > judged ? a - judged : judged - a) < (b > judged ? b - judged : judged - b);
+  });
+  const detail::LocalMap local_map(settings, cpu);
+  detail::JudgingClouds clouds(local_map);
+  const std::vector<WorldModel> blocks = clouds.models(state, near, judged);
+  // Scans 0-15: one block; 16-31 hold the judged scan: 15 trees; 32-39 are no whole block: 8.
+  EXPECT_EQ(blocks.size(), 1u + 15u + 8u);
+  EXPECT_EQ(clouds.held(), blocks.size());
+  std::vector<std::shared_ptr<const PreparedCloud>> own;
+  std::vector<WorldModel> each;
+  for (const std::size_t j : near) {
+    own.push_back(cpu.prepare(state.prepared(j).model_cloud->point_vector(), settings.tree));
+    each.push_back({own.back().get(), state.pose(j)});
+  }
+  const Pose& at = state.pose(judged);
+  const auto search = [&](ComputeBackend& backend, const PreparedCloud& data, const std::vector<WorldModel>& models) {
+    std::vector<ModelPlacement> placed;
+    for (const WorldModel& m : models) placed.push_back({m.cloud, rigid_inverse(m.world_from_model) * at});
+    return backend.nearest(data, placed, SearchMethod::kExact, PairingSettings{200.0f});
+  };
+  const PreparedCloud& data = *state.prepared(judged).probe;
+  const std::vector<NearestPair> by_block = search(cpu, data, blocks);
+  const std::vector<NearestPair> by_scan = search(cpu, data, each);
+  ASSERT_EQ(by_block.size(), data.points().size());
+  std::size_t paired = 0;
+  for (std::size_t k = 0; k < by_block.size(); ++k) {
+    // The brute force, in double in the world frame.
+    const Eigen::Vector3d p = at.block<3, 3>(0, 0) * data.points()[k].cast<double>() + at.block<3, 1>(0, 3);
+    double best = 200.0 * 200.0;
+    bool found = false;
+    for (const std::size_t j : near) {
+      const Pose& pose = state.pose(j);
+      for (const Eigen::Vector3f& m : state.prepared(j).model_cloud->points()) {
+        const double d = (pose.block<3, 3>(0, 0) * m.cast<double>() + pose.block<3, 1>(0, 3) - p).squaredNorm();
+        if (d < best) {
+          best = d;
+          found = true;
+        }
+      }
+    }
+    ASSERT_EQ(by_block[k].squared_distance_cm2 >= 0.0f, found) << "point " << k;
+    ASSERT_EQ(by_scan[k].squared_distance_cm2 >= 0.0f, found) << "point " << k;
+    if (!found) continue;
+    ++paired;
+    EXPECT_NEAR(by_block[k].squared_distance_cm2, best, 1e-5 * best + 1e-3) << "point " << k;
+    EXPECT_NEAR(by_block[k].squared_distance_cm2, by_scan[k].squared_distance_cm2, 1e-5 * best + 1e-3) << "point " << k;
+  }
+  EXPECT_GT(paired, by_block.size() / 2);
+  clouds.forget_unused(judged + detail::JudgingClouds::kKeptFor + 1);
+  EXPECT_EQ(clouds.held(), 0u);
+  // The device's trees, searched on the device: the host's distances bit for bit.
+  const std::unique_ptr<ComputeBackend> opencl = test::opencl_backend();  // throws without OpenCL: fails
+  detail::SurveyState on_device;
+  fill(*opencl, on_device);
+  const detail::LocalMap device_map(settings, *opencl);
+  detail::JudgingClouds device_clouds(device_map);
+  const std::vector<NearestPair> device =
+      search(*opencl, *on_device.prepared(judged).probe, device_clouds.models(on_device, near, judged));
+  ASSERT_EQ(device.size(), by_block.size());
+  for (std::size_t k = 0; k < device.size(); ++k) {
+    EXPECT_EQ(device[k].squared_distance_cm2, by_block[k].squared_distance_cm2) << "point " << k;
+  }
 }
 
 // A metascan's union on the OpenCL device (kernels/union.cl) is the host's bit for bit: the points

@@ -7,6 +7,9 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <span>
+#include <unordered_map>
 
 namespace minemap::detail {
 namespace {
@@ -181,6 +184,69 @@ std::shared_ptr<const PreparedCloud> LocalMap::union_of(const SurveyState& state
   }
   const std::vector<std::vector<Eigen::Vector3f>> parts = backend_.placed_within(placed, reach_min, reach_max);
   return backend_.prepare(thin_cm > 0.0 ? first_point_per_cell(parts, thin_cm) : concatenated(parts), settings_.tree);
+}
+
+std::shared_ptr<const PreparedCloud> LocalMap::whole_union(const SurveyState& state,
+                                                           const std::vector<std::size_t>& scans,
+                                                           const Pose& frame) const {
+  const Pose frame_inverse = rigid_inverse(frame);
+  std::vector<ModelPoints> models;
+  models.reserve(scans.size());
+  for (const std::size_t j : scans) models.push_back(state.model_points(j));
+  std::vector<UnionPart> placed(scans.size());
+  for (std::size_t k = 0; k < scans.size(); ++k) {
+    placed[k] = {models[k].points(), models[k].cloud(), frame_inverse * state.pose(scans[k])};
+  }
+  const double everywhere = std::numeric_limits<double>::max();  // finite: kernels may assume finite math
+  const Eigen::Vector3d lowest = Eigen::Vector3d::Constant(-everywhere), highest = Eigen::Vector3d::Constant(everywhere);
+  return backend_.prepare(concatenated(backend_.placed_within(placed, lowest, highest)), settings_.tree);
+}
+
+std::vector<WorldModel> JudgingClouds::models(const SurveyState& state, const std::vector<std::size_t>& near,
+                                              std::size_t judged) {
+  std::unordered_map<std::size_t, std::size_t> in_block;  // block -> how many of near it holds
+  for (const std::size_t j : near) ++in_block[j / kBlockScans];
+  std::vector<WorldModel> models;
+  std::unordered_map<std::size_t, bool> placed;
+  for (const std::size_t j : near) {
+    const std::size_t b = j / kBlockScans;
+    if (in_block[b] < kBlockScans) {
+      models.push_back({scan(state, j, judged), state.pose(j)});
+    } else if (!placed[b]) {
+      placed[b] = true;
+      models.push_back({block(state, b, judged), state.pose(b * kBlockScans)});
+    }
+  }
+  return models;
+}
+
+const PreparedCloud* JudgingClouds::scan(const SurveyState& state, std::size_t j, std::size_t judged) {
+  auto [at, fresh] = scans_.try_emplace(j);
+  if (fresh) {
+    const ModelPoints model = state.model_points(j);  // a let-go scan's read from the spill
+    const std::span<const Eigen::Vector3f> points = model.points();
+    at->second.cloud = local_map_.backend_.prepare(std::vector<Eigen::Vector3f>(points.begin(), points.end()),
+                                                   local_map_.settings_.tree);
+  }
+  at->second.last_used = judged;
+  return at->second.cloud.get();
+}
+
+const PreparedCloud* JudgingClouds::block(const SurveyState& state, std::size_t b, std::size_t judged) {
+  auto [at, fresh] = blocks_.try_emplace(b);
+  if (fresh) {
+    std::vector<std::size_t> scans(kBlockScans);
+    for (std::size_t k = 0; k < scans.size(); ++k) scans[k] = b * kBlockScans + k;
+    at->second.cloud = local_map_.whole_union(state, scans, state.pose(scans.front()));
+  }
+  at->second.last_used = judged;
+  return at->second.cloud.get();
+}
+
+void JudgingClouds::forget_unused(std::size_t judged) {
+  const auto unused = [&](const auto& entry) { return entry.second.last_used + kKeptFor < judged; };
+  std::erase_if(scans_, unused);
+  std::erase_if(blocks_, unused);
 }
 
 }  // namespace minemap::detail

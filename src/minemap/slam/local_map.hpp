@@ -6,11 +6,12 @@
 // nearby scans hold about ten times the points that lie there, docs/benchmarks.md), expressed in a
 // frame near the scan so its float coordinates stay small wherever the survey is. The relaxation's
 // union of neighbours (paper, IV.B step 3) is built by the same code. The judging after the loops,
-// one pass over a quarter of a scan's points, does not pay back such a build: it searches the
-// neighbours' own trees (judging_scans below; slam/loop_closing.cpp).
+// one pass over a quarter of a scan's points, does not pay back such a build: it searches trees
+// kept from one judged scan to the next (JudgingClouds below; slam/loop_closing.cpp).
 //
 // Thread-safety: uses the backend, one thread at a time; assembles in parallel, deterministically.
 #include <memory>
+#include <unordered_map>
 #include <vector>
 
 #include "minemap/backend/compute_backend.hpp"
@@ -67,9 +68,62 @@ class LocalMap {
                                                 const std::vector<std::size_t>& near, const Pose& frame,
                                                 const Pose& at, double grow_cm, double thin_cm = 0.0) const;
 
+  /// One kd-tree, in the frame `frame`, of all the model points of `scans` (where they stand),
+  /// concatenated in the order given: none cropped, none thinned.
+  std::shared_ptr<const PreparedCloud> whole_union(const SurveyState& state, const std::vector<std::size_t>& scans,
+                                                   const Pose& frame) const;
+
  private:
   const MappingSettings& settings_;
   ComputeBackend& backend_;
+
+  friend class JudgingClouds;
+};
+
+/// The model clouds the judging after the loops searches, each with a kd-tree of its own, built
+/// the first time a judged scan needs it and let go of once the scans judged since have not needed
+/// it: a scan's model points in its own frame, or a block's (kBlockScans scans in a row, all among
+/// a judged scan's neighbours) in its first scan's frame. Scans in a row are judged against nearly
+/// the same neighbours, so each judged scan builds the trees of the few that came into reach. The
+/// judge reads distances only, and the exact search over these trees finds each probe point's
+/// nearest model point as one tree over the neighbours' union would (to the last bits of a float:
+/// each distance is taken in its tree's frame), without the union's crop to the scan's box grown by
+/// the pair bound (docs/scaling.md, "Loops at scale").
+///
+/// Thread-safety: one thread; the clouds live until forgotten or the object ends.
+class JudgingClouds {
+ public:
+  /// How many scans in a row (indices kBlockScans b ... kBlockScans b + kBlockScans - 1) one block
+  /// tree holds. A dense sequence judges each scan against hundreds of neighbours (a 314-keyframe
+  /// hand-held loop: 306 on average, each probe point searched in every tree); they come in runs of
+  /// the drive, so most of them fill whole blocks, one search each (docs/benchmarks.md).
+  static constexpr std::size_t kBlockScans = 16;
+  /// How many judged scans a cloud outlives its last use by: a scan comes back into reach after a
+  /// few at most, and then its tree is not built again.
+  static constexpr std::size_t kKeptFor = 8;
+
+  explicit JudgingClouds(const LocalMap& local_map) : local_map_(local_map) {}
+
+  /// The clouds scan `judged` is judged against, `near` its neighbours (LocalMap::judging_scans):
+  /// one per block whose scans all are in `near`, one per other scan of `near`; in the order of
+  /// `near` (a block where the first of its scans stands), each with the world pose of its frame.
+  std::vector<WorldModel> models(const SurveyState& state, const std::vector<std::size_t>& near, std::size_t judged);
+  /// Lets go of the clouds none of the last kKeptFor judged scans used.
+  void forget_unused(std::size_t judged);
+  /// How many trees are held (the test of the blocks).
+  std::size_t held() const { return scans_.size() + blocks_.size(); }
+
+ private:
+  struct Held {
+    std::shared_ptr<const PreparedCloud> cloud;
+    std::size_t last_used = 0;
+  };
+  const PreparedCloud* scan(const SurveyState& state, std::size_t j, std::size_t judged);
+  const PreparedCloud* block(const SurveyState& state, std::size_t b, std::size_t judged);
+
+  const LocalMap& local_map_;
+  std::unordered_map<std::size_t, Held> scans_;
+  std::unordered_map<std::size_t, Held> blocks_;
 };
 
 }  // namespace minemap::detail

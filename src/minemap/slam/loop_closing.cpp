@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cstdio>
 #include <span>
-#include <unordered_map>
 
 #include "minemap/registration/match_information.hpp"
 
@@ -17,48 +16,6 @@ std::vector<double> driven_cm(const SurveyState& state) {
   for (std::size_t k = 1; k < state.size(); ++k) driven[k] = driven[k - 1] + (position(k) - position(k - 1)).norm();
   return driven;
 }
-
-/// How many judged scans a neighbour's cloud outlives its last use by (JudgingClouds): a scan comes
-/// back into reach after a few at most, and then its tree is not built again.
-constexpr std::size_t kJudgingCloudsKept = 8;
-
-/// The model clouds the judging searches: each scan's model points with a kd-tree of their own, in
-/// the scan's frame, built the first time a judged scan needs it and let go of once the scans judged
-/// since have not needed it. Scans in a row are judged against nearly the same neighbours, so each
-/// judged scan builds the trees of the few that came into reach. The judge reads distances only, and
-/// the exact search over the neighbours' own trees finds each probe point's nearest model point as a
-/// tree over their union does, to the last bits of a float (each distance is taken in its
-/// neighbour's frame) and without the union's crop to the scan's box grown by the pair bound
-/// (docs/scaling.md, "Loops at scale"). One thread.
-class JudgingClouds {
- public:
-  JudgingClouds(ComputeBackend& backend, const KdTreeSettings& tree) : backend_(backend), tree_(tree) {}
-
-  /// Scan j's model cloud, for the scan judged as the `judged`-th.
-  const PreparedCloud* of(const SurveyState& state, std::size_t j, std::size_t judged) {
-    auto [at, fresh] = clouds_.try_emplace(j);
-    if (fresh) {
-      const ModelPoints model = state.model_points(j);  // a let-go scan's read from the spill
-      const std::span<const Eigen::Vector3f> points = model.points();
-      at->second.cloud = backend_.prepare(std::vector<Eigen::Vector3f>(points.begin(), points.end()), tree_);
-    }
-    at->second.last_used = judged;
-    return at->second.cloud.get();
-  }
-  /// Lets go of the clouds none of the last `keep` judged scans used.
-  void forget_unused(std::size_t judged, std::size_t keep) {
-    std::erase_if(clouds_, [&](const auto& entry) { return entry.second.last_used + keep < judged; });
-  }
-
- private:
-  struct Held {
-    std::shared_ptr<const PreparedCloud> cloud;
-    std::size_t last_used = 0;
-  };
-  ComputeBackend& backend_;
-  const KdTreeSettings& tree_;
-  std::unordered_map<std::size_t, Held> clouds_;
-};
 
 }  // namespace
 
@@ -218,20 +175,18 @@ void LoopClosing::doubt_unclosed_return(SurveyState& state, const LoopClosure& l
 void LoopClosing::judge_again(SurveyState& state, const RunControl& control) const {
   // The relaxation moved every scan: each is judged again where it ended, against the scans near it
   // (loops.judge_max_visits, judge_max_scans). A scan that looked doubtful against a few recent
-  // scans (a corner that sees where the drive began) is then judged against the start too. Each
-  // neighbour is searched with its own tree (JudgingClouds), not one tree over their union: the
+  // scans (a corner that sees where the drive began) is then judged against the start too. The
+  // neighbours are searched in trees kept from scan to scan (JudgingClouds: one per block of 16
+  // in a row, else one per scan), not one tree over their union built for each judged scan: the
   // judge's one pass over a scan's probe points never paid back that build (72 % of the judging).
-  JudgingClouds clouds(backend_, settings_.tree);
+  JudgingClouds clouds(local_map_);
   const std::shared_ptr<const PreparedCloud> nothing = backend_.prepare({}, settings_.tree);
   for (std::size_t k = 1; k < state.size() && !control.stop_requested(); ++k) {
     control.report(k + 1, "judging");
     const RegistrationHealth& old = state.health(k);
     if (!state.registered(k) || !old.judged || old.out_of_reach) continue;
     const Pose& pose = state.pose(k);
-    std::vector<WorldModel> models;
-    for (const std::size_t j : local_map_.judging_scans(state, k, pose)) {
-      models.push_back({clouds.of(state, j, k), state.pose(j)});
-    }
+    std::vector<WorldModel> models = clouds.models(state, local_map_.judging_scans(state, k, pose), k);
     if (models.empty()) models.push_back({nothing.get(), pose});  // judged, and nothing pairs
     RegistrationHealth health = registration_.judge(state.prepared(k), pose, pose, models);
     health.correction_cm = old.correction_cm;
@@ -240,7 +195,7 @@ void LoopClosing::judge_again(SurveyState& state, const RunControl& control) con
     health.retry_bound_cm = old.retry_bound_cm;
     health.after_loop_closure = true;
     state.judged(k, std::move(health));
-    clouds.forget_unused(k, kJudgingCloudsKept);
+    clouds.forget_unused(k);
     state.release_over_budget();
   }
 }
