@@ -527,19 +527,19 @@ TEST(MappingSimulatedMine, AScanLetGoOfGivesTheModelPointsItHeld) {
 }
 
 // The judging after the loops searches a block of 16 scans in a row, all among a scan's
-// neighbours, as one tree (JudgingClouds): each point's nearest model point is the one the
+// neighbours and standing at one place, as one tree (JudgingClouds): each point's nearest model point is the one the
 // neighbours' own trees give (the distance to a float's last bits: taken in the block's frame), and
 // the brute force's; the judged scan's own block and a ragged end are searched scan by scan. On
 // the OpenCL device the same trees give the host's distances bit for bit.
 TEST(MappingJudging, BlocksOfScansInARowFindWhatEachScansOwnTreeFinds) {
   CpuBackend cpu;
   const MappingSettings settings;
-  const auto fill = [&](ComputeBackend& backend, detail::SurveyState& state) {
+  const auto fill = [&](ComputeBackend& backend, detail::SurveyState& state, double step_cm) {
     for (std::size_t i = 0; i < 40; ++i) {
       Scan scan;
       scan.name = "scan" + std::to_string(i);
       scan.pose_cm.block<3, 3>(0, 0) = Eigen::AngleAxisd(0.01 * double(i), Eigen::Vector3d::UnitZ()).toRotationMatrix();
-      scan.pose_cm.block<3, 1>(0, 3) = Eigen::Vector3d(50.0 * double(i), 3.0 * double(i), -1.0 * double(i));
+      scan.pose_cm.block<3, 1>(0, 3) = Eigen::Vector3d(step_cm * double(i), 3.0 * double(i), -1.0 * double(i));
       detail::PreparedScan prepared;
       prepared.cloud = backend.prepare(test::random_cloud(300, -500.f, 500.f, 700 + std::uint32_t(i)), settings.tree);
       prepared.model_cloud = prepared.cloud;
@@ -548,7 +548,7 @@ TEST(MappingJudging, BlocksOfScansInARowFindWhatEachScansOwnTreeFinds) {
     }
   };
   detail::SurveyState state;
-  fill(cpu, state);
+  fill(cpu, state, 50.0);  // 16 scans in a row over 7.5 m: at one place (loops.max_distance_cm)
   const std::size_t judged = 20;
   std::vector<std::size_t> near;
   for (std::size_t j = 0; j < state.size(); ++j) {
@@ -604,11 +604,18 @@ TEST(MappingJudging, BlocksOfScansInARowFindWhatEachScansOwnTreeFinds) {
   }
   EXPECT_GT(paired, by_block.size() / 2);
   clouds.forget_unused(judged + detail::JudgingClouds::kKeptFor + 1);
+  EXPECT_EQ(clouds.held(), 1u);  // the block outlives the judged scans of its own
+  clouds.forget_unused(judged + detail::JudgingClouds::kKeptFor + detail::JudgingClouds::kBlockScans + 1);
   EXPECT_EQ(clouds.held(), 0u);
+  // Scans 4 m apart (stop-and-go) are no place's: each searched in its own tree.
+  detail::SurveyState apart;
+  fill(cpu, apart, 400.0);
+  detail::JudgingClouds scan_by_scan(local_map);
+  EXPECT_EQ(scan_by_scan.models(apart, near, judged).size(), near.size());
   // The device's trees, searched on the device: the host's distances bit for bit.
   const std::unique_ptr<ComputeBackend> opencl = test::opencl_backend();  // throws without OpenCL: fails
   detail::SurveyState on_device;
-  fill(*opencl, on_device);
+  fill(*opencl, on_device, 50.0);
   const detail::LocalMap device_map(settings, *opencl);
   detail::JudgingClouds device_clouds(device_map);
   const std::vector<NearestPair> device =

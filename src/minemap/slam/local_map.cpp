@@ -210,7 +210,7 @@ std::vector<WorldModel> JudgingClouds::models(const SurveyState& state, const st
   std::unordered_map<std::size_t, bool> placed;
   for (const std::size_t j : near) {
     const std::size_t b = j / kBlockScans;
-    if (in_block[b] < kBlockScans) {
+    if (in_block[b] < kBlockScans || !at_one_place(state, b)) {
       models.push_back({scan(state, j, judged), state.pose(j)});
     } else if (!placed[b]) {
       placed[b] = true;
@@ -232,6 +232,18 @@ const PreparedCloud* JudgingClouds::scan(const SurveyState& state, std::size_t j
   return at->second.cloud.get();
 }
 
+bool JudgingClouds::at_one_place(const SurveyState& state, std::size_t b) {
+  auto [at, fresh] = one_place_.try_emplace(b, false);
+  if (fresh) {
+    double path_cm = 0.0;
+    for (std::size_t j = b * kBlockScans + 1; j < (b + 1) * kBlockScans; ++j) {
+      path_cm += (state.pose(j).block<3, 1>(0, 3) - state.pose(j - 1).block<3, 1>(0, 3)).norm();
+    }
+    at->second = path_cm <= local_map_.settings_.loops.max_distance_cm;
+  }
+  return at->second;
+}
+
 const PreparedCloud* JudgingClouds::block(const SurveyState& state, std::size_t b, std::size_t judged) {
   auto [at, fresh] = blocks_.try_emplace(b);
   if (fresh) {
@@ -246,7 +258,8 @@ const PreparedCloud* JudgingClouds::block(const SurveyState& state, std::size_t 
 void JudgingClouds::forget_unused(std::size_t judged) {
   const auto unused = [&](const auto& entry) { return entry.second.last_used + kKeptFor < judged; };
   std::erase_if(scans_, unused);
-  std::erase_if(blocks_, unused);
+  // A block is not used while the judged scans are its own (judged scans in a row): kept through.
+  std::erase_if(blocks_, [&](const auto& entry) { return entry.second.last_used + kKeptFor + kBlockScans < judged; });
 }
 
 }  // namespace minemap::detail
