@@ -82,25 +82,26 @@ class LocalMap {
 
 /// The model clouds the judging after the loops searches, each with a kd-tree of its own, built
 /// the first time a judged scan needs it and let go of once the scans judged since have not needed
-/// it: a scan's model points in its own frame, or a block's (kBlockScans scans in a row, all among
-/// a judged scan's neighbours) in its first scan's frame. Scans in a row are judged against nearly
+/// it: a scan's model points in its own frame, or a block's (kBlockScans scans in a row standing at
+/// one place, all among a judged scan's neighbours) in its first scan's frame. Scans in a row are judged against nearly
 /// the same neighbours, so each judged scan builds the trees of the few that came into reach. The
 /// judge reads distances only, and the exact search over these trees finds each probe point's
 /// nearest model point as one tree over the neighbours' union would (to the last bits of a float:
 /// each distance is taken in its tree's frame), without the union's crop to the scan's box grown by
 /// the pair bound (docs/scaling.md, "Loops at scale").
 ///
-/// Thread-safety: one thread; the clouds live until forgotten or the object ends.
+/// Thread-safety: one thread. The scans must not move while it lives (one per judging pass): the
+/// clouds and whether a block stands at one place are kept as first found.
 class JudgingClouds {
  public:
   /// How many scans in a row (indices kBlockScans b ... kBlockScans b + kBlockScans - 1) one block
-  /// tree holds. A dense sequence judges each scan against hundreds of neighbours (a 314-keyframe
-  /// hand-held loop: 306 on average, each probe point searched in every tree); they come in runs of
-  /// the drive, so most of them fill whole blocks, one search each (docs/benchmarks.md). Only blocks
-  /// whose scans stand at one place (their drive no longer than loops.max_distance_cm, a loop
-  /// candidate's distance): stop-and-go scans metres apart see different stretches of the mine, and
-  /// each scan's own box leaves out more of the search than a block's, while the block's tree is one
-  /// more to build (ten laps of 4 m steps: judging 3.2 -> 4.9 s with blocks).
+  /// tree holds. A dense sequence (hand-held keyframes, sweeps half a second apart) judges each scan
+  /// against hundreds of neighbours, each probe point searched in every tree; they come in runs of
+  /// the drive, so most of them fill whole blocks, one search each. Only blocks whose scans stand at
+  /// one place (their drive no longer than loops.max_distance_cm, a loop candidate's distance):
+  /// stop-and-go scans metres apart see different stretches of the mine, each scan's own box leaves
+  /// out more of the search than a block's, and the block's tree is one more to build (the figures:
+  /// docs/benchmarks.md, "The judging after the loops, in blocks").
   static constexpr std::size_t kBlockScans = 16;
   /// How many judged scans a cloud outlives its last use by: a scan comes back into reach after a
   /// few at most, and then its tree is not built again.
