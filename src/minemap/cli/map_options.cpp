@@ -214,6 +214,9 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
   flag(g, "--provisional-all-points", map.provisional_all_points,
        "A sweep's first match, before its deskew is refined, matches all its points (the default matches the "
        "health probe's, every --health-probe-stride-th)");
+  flag(g, "--wide-coarse-all-points", map.wide_coarse_all_points,
+       "The first match at the adaptive bound runs its coarse stage on all the scan's points (the default: the "
+       "health probe's; the fine stage matches all of them)");
 }
 
 void MapOptionTable::declare_relaxation(MappingSettings& mapping) {
@@ -321,6 +324,7 @@ void finish_settings(MapCommand& command) {
   if (options.no_retry) settings.retry_bound_factors.clear();
   if (options.no_recovery) settings.recovery.enabled = false;
   if (options.provisional_all_points) settings.motion.provisional_probe = false;
+  if (options.wide_coarse_all_points) settings.motion.wide_coarse_probe = false;
   if (options.no_loops) settings.loops.enabled = false;
   if (options.loop_edges_alike) settings.loops.information_from_geometry = false;
   if (!options.control.empty()) settings.control.keep_graph = true;

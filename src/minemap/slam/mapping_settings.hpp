@@ -106,6 +106,13 @@ struct MotionSettings {
   /// Whether a sweep's first match is provisional (by either setting above): then its refinement
   /// always matches again, to ICP's least step, with all points.
   bool provisional() const { return provisional_step_factor > 1.0 || provisional_probe; }
+  /// The first match at the adaptive bound (wider than the pair bound) runs its coarse stage, at
+  /// that bound, on the health probe's points alone: it only has to bring the scan within the pair
+  /// bound's reach, and the fine stage after it matches every point. On real hand-held keyframes
+  /// (no times: every match is final) the coarse stage was more than half of the iterations at a
+  /// bound of metres; docs/benchmarks.md, "Moving LiDAR", has the figures. Retries and loop matches
+  /// (stop-and-go surveys' too) keep all points.
+  bool wide_coarse_probe = true;
   /// A sweep's metascan keeps at most one model point in each cell of this size (the nearest
   /// scan's): a moving sensor's scans overlap tens of times, and a tree over all their points costs
   /// more to build than the match it serves (KISS-ICP's voxel map thins the same way). 0: all.

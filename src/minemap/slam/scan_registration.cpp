@@ -27,13 +27,15 @@ IcpSettings ScanRegistration::icp_for(const PreparedScan& scan, Convergence conv
 
 WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, const Pose& start,
                                                   std::span<const WorldModel> models, float bound_cm,
-                                                  Convergence convergence) const {
+                                                  Convergence convergence, bool coarse_on_probe) const {
   const IcpSettings icp = icp_for(scan, convergence);
   IcpSettings wide = icp;
   wide.max_pair_dist_cm = bound_cm;
   wide.refine_pair_dist_fraction = 0.0f;
   WideMatch match;
-  const IcpResult coarse = register_icp(backend_, data_of(scan, convergence), start, models, wide);
+  const PreparedCloud& coarse_data = coarse_on_probe ? *scan.probe : data_of(scan, convergence);
+  if (coarse_on_probe) wide.termination.min_pairs = settings_.min_pairs_for(coarse_data.points().size());
+  const IcpResult coarse = register_icp(backend_, coarse_data, start, models, wide);
   match.iterations += coarse.iterations();
   if (!coarse.ok()) {
     match.failure = to_string(coarse.stop);
@@ -61,7 +63,8 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
   if (start_bound_cm > widest_cm) {
     // The motion model's adaptive bound: the first match is a wide one, coarse to fine.
     const std::vector<WorldModel> models = models_for(start_bound_cm, start);
-    WideMatch wide = match_from_wide_bound(scan, start, models, start_bound_cm, convergence);
+    WideMatch wide =
+        match_from_wide_bound(scan, start, models, start_bound_cm, convergence, settings_.motion.wide_coarse_probe);
     match.iterations = wide.iterations;
     if (!wide.fine) {
       match.first = wide.failed;

@@ -68,9 +68,11 @@ class ScanRegistration {
                           float start_bound_cm = 0.0f, Convergence convergence = Convergence::kFinal) const;
 
   /// ICP at `bound_cm` from `start` (no refinement), then the usual phases from where that ended,
-  /// judged with the reach of the wide bound.
+  /// judged with the reach of the wide bound. `coarse_on_probe`: the first ICP on the health probe's
+  /// points (MotionSettings::wide_coarse_probe).
   WideMatch match_from_wide_bound(const PreparedScan& scan, const Pose& start, std::span<const WorldModel> models,
-                                  float bound_cm, Convergence convergence = Convergence::kFinal) const;
+                                  float bound_cm, Convergence convergence = Convergence::kFinal,
+                                  bool coarse_on_probe = false) const;
 
   /// The health of `scan` at `pose`, moved there from `start`, against `models`, at the pair bound
   /// (the reach test at `reach_bound_cm` when > 0).
