@@ -193,6 +193,8 @@ void LoopClosing::judge_again(SurveyState& state, const RunControl& control) con
     health.correction_deg = old.correction_deg;
     health.moved_cm = old.moved_cm;
     health.retry_bound_cm = old.retry_bound_cm;
+    health.recovered_inliers = old.recovered_inliers;
+    health.note = old.note;  // how its match was confirmed, recovered or kept: still how it got there
     health.after_loop_closure = true;
     state.judged(k, std::move(health));
     clouds.forget_unused(k);
