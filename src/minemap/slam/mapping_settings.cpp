@@ -144,6 +144,12 @@ void MotionSettings::validate() const {
   if (!(provisional_step_factor >= 1.0) || !std::isfinite(provisional_step_factor)) {
     throw std::invalid_argument("the provisional match's step factor must be finite and >= 1");
   }
+  if (!(slide_constraint >= 0.0 && slide_constraint <= 1.0)) {
+    throw std::invalid_argument("the slide test's constraint must be a fraction in [0, 1] (0 = off)");
+  }
+  if (!(slide_rms_factor > 0.0 && slide_rms_factor <= 1.0)) {
+    throw std::invalid_argument("the slide test's RMS factor must be in (0, 1]");
+  }
 }
 
 void ControlSettings::validate() const {

@@ -130,6 +130,17 @@ struct MotionSettings {
   int confirm_min_history = 3;
   double confirm_agree_cm = 5.0;
   double confirm_agree_deg = 0.5;
+  /// A constant-velocity match whose pairs' planes pin its weakest translation less than this
+  /// fraction of its best (RegistrationHealth::translation_constraint) and that moved the scan more
+  /// than the pair bound along it is matched again from the prediction along that direction; the
+  /// second match is kept when trusted, nearer the prediction along it and a closer fit
+  /// (SurveyMatcher::prefer_prediction_along_slide). On real hand-held walks (a narrow-field sensor
+  /// in corridors) matches slid metres along such a direction and were trusted; the simulated mines
+  /// pin it better (docs/benchmarks.md, "Moving LiDAR"). 0: off.
+  double slide_constraint = 0.05;
+  /// ...and kept only where its pairs' RMS distance is below this times the first match's: a clearly
+  /// closer fit, not one within the noise of two fits alike.
+  double slide_rms_factor = 0.95;
   void validate() const;
   bool operator==(const MotionSettings&) const = default;
 };

@@ -98,4 +98,13 @@ Pose MotionPrediction::sweep_motion(const SurveyState& state, std::size_t j, con
   return motion_fraction(step, fraction);
 }
 
+Pose without_move_along(const Pose& predicted, const Pose& matched, const Eigen::Vector3d& direction,
+                        double* along_cm) {
+  Pose correction = rigid_inverse(predicted) * matched;
+  const double along = direction.dot(correction.block<3, 1>(0, 3));
+  correction.block<3, 1>(0, 3) -= along * direction;
+  if (along_cm != nullptr) *along_cm = along;
+  return predicted * correction;
+}
+
 }  // namespace minemap::detail

@@ -69,4 +69,12 @@ class MotionPrediction {
   const MappingSettings& settings_;
 };
 
+/// A match's pose with its move from the prediction along one direction taken out: T_world_points
+/// `predicted` times the correction predicted -> `matched`, less that correction's translation along
+/// `direction` (unit, in the predicted points' frame; the rest of the translation and the whole
+/// rotation kept). `along_cm` receives the part taken out. Where a match that slid along the
+/// direction its surfaces pin least starts again (SurveyMatcher::prefer_prediction_along_slide).
+Pose without_move_along(const Pose& predicted, const Pose& matched, const Eigen::Vector3d& direction,
+                        double* along_cm = nullptr);
+
 }  // namespace minemap::detail

@@ -304,6 +304,56 @@ void SurveyMatcher::keep_first_match(ScanMatch& match, const char* refuted) {
   match.health.doubt += std::string(" (") + refuted + "; the scan stays where its first match put it)";
 }
 
+void SurveyMatcher::prefer_prediction_along_slide(std::size_t i, const Prediction& prediction, ScanMatch& match,
+                                                  Convergence convergence) {
+  const MotionSettings& motion = settings_.motion;
+  const RegistrationHealth& health = match.health;
+  if (!prediction.constant_velocity || !match.ok()) return;
+  if (!(health.translation_constraint >= 0.0 && health.translation_constraint < motion.slide_constraint)) return;
+  if (motion_.recent_error(state_, i).count < motion.confirm_min_history) return;
+  const double bound_cm = settings_.pairwise_icp().max_pair_dist_cm;
+  // The weakest direction is measured in the scan's own frame; the predicted start's is that frame
+  // turned by the correction's few degrees.
+  const Eigen::Vector3d& weakest = health.weakest_direction;
+  double slid_cm = 0.0;
+  Prediction here;
+  here.start = without_move_along(prediction.start, match.kept().world_from_data, weakest, &slid_cm);
+  here.start_bound_cm = static_cast<float>(bound_cm);
+  if (!(std::abs(slid_cm) > bound_cm)) return;
+  const auto along_cm = [&](const Pose& pose) {
+    double along = 0.0;
+    without_move_along(prediction.start, pose, weakest, &along);
+    return along;
+  };
+  const LastMetascan first_metascan = last_metascan_;  // a second match not kept changes nothing
+  ScanMatch second = match_from(i, here, convergence);
+  step1_iterations_ += second.iterations;
+  // Not by the pair count: a forward-looking sensor sees past the map's end, and those points pair
+  // only when the scan slides back along the corridor, so the slid match pairs more; its pairs sit
+  // farther apart.
+  const bool better = second.ok() && !second.health.doubtful() &&
+                      std::abs(along_cm(second.kept().world_from_data)) < std::abs(slid_cm) &&
+                      second.health.rms_cm < motion.slide_rms_factor * health.rms_cm;
+  if (!better) {
+    last_metascan_ = first_metascan;
+    return;
+  }
+  const Pose found = second.kept().world_from_data;
+  const double second_cm = along_cm(found);
+  const Pose correction = rigid_inverse(prediction.start) * found;
+  char text[400];
+  std::snprintf(text, sizeof text,
+                "its first match slid %.0f cm from the prediction along the direction its surfaces pin least (%.3f "
+                "times the best, RMS %.1f cm); a match from the prediction along it ended %.0f cm along, RMS %.1f cm: "
+                "kept",
+                slid_cm, health.translation_constraint, health.rms_cm, second_cm, second.health.rms_cm);
+  second.health.correction_cm = translation_norm(correction);
+  second.health.correction_deg = rotation_angle_deg(correction);
+  second.health.moved_cm = rms_moved_cm(*state_.prepared(i).probe, prediction.start, found);
+  second.health.note = health.note.empty() ? std::string(text) : health.note + "; " + text;
+  match = std::move(second);
+}
+
 bool SurveyMatcher::recovery_on(std::size_t i) const {
   return settings_.recovery.enabled && i >= 1 && state_.registered(i - 1);
 }
@@ -453,6 +503,7 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
     confirm_far_match(i, prediction, match, convergence);
     Pose start = prediction.start;
     recover(i, prediction, match, start, convergence);
+    prefer_prediction_along_slide(i, prediction, match, convergence);
     place(i, match, start);
     if (raw != nullptr && timing != nullptr) refine_deskew(i, *raw, *timing, convergence);
   });

@@ -104,6 +104,15 @@ class SurveyMatcher {
   /// A constant-velocity start's `match` and `start` are replaced when the new match is trusted; an
   /// odometry start's pose is kept. A doubt says what was tried when it stays.
   void recover(std::size_t i, const Prediction& prediction, ScanMatch& match, Pose& start, Convergence convergence);
+  /// A constant-velocity match that its surfaces pin only weakly along one direction
+  /// (MotionSettings::slide_constraint) and that moved the scan along it more than the pair bound
+  /// from the prediction: matched again from the prediction with that move taken out (the rest of
+  /// its correction kept), at the pair bound. A narrow-field hand-held sensor in a corridor slides
+  /// metres along it from a wide first match, and fits as well there. The second is kept when
+  /// trusted and nearer the prediction along that direction: of two fits the surfaces cannot tell
+  /// apart, the one the motion model expects (its note says so).
+  void prefer_prediction_along_slide(std::size_t i, const Prediction& prediction, ScanMatch& match,
+                                     Convergence convergence);
   /// Whether scan i may be recovered: recovery on, scan i-1 registered.
   bool recovery_on(std::size_t i) const;
   /// Where scan i's features put it (Recovery::find), computed once per scan.
