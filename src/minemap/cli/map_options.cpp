@@ -206,8 +206,8 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
          "bound (0 = off)");
   number(g, "--slide-constraint", mapping.motion.slide_constraint,
          "Constant velocity: a match pinned along its weakest direction less than this fraction of its best, and "
-         "moved along it more than the pair bound, is matched again from the prediction along it; the match "
-         "nearer the prediction is kept when trusted (0 = off)");
+         "moved along it more than the pair bound, is matched again from the prediction along it; that match is "
+         "kept when trusted, nearer the prediction and a clearly closer fit (0 = off)");
   number(g, "--metascan-margin-cm", mapping.metascan_margin_cm,
          "Metascan: model points within the scan's box grown by the pair bound and this");
   number(g, "--local-map-cell-cm", mapping.motion.local_map_cell_cm,

@@ -315,16 +315,16 @@ void SurveyMatcher::prefer_prediction_along_slide(std::size_t i, const Predictio
   // The weakest direction is measured in the scan's own frame; the predicted start's is that frame
   // turned by the correction's few degrees.
   const Eigen::Vector3d& weakest = health.weakest_direction;
-  double slid_cm = 0.0;
-  Prediction here;
-  here.start = without_move_along(prediction.start, match.kept().world_from_data, weakest, &slid_cm);
-  here.start_bound_cm = static_cast<float>(bound_cm);
-  if (!(std::abs(slid_cm) > bound_cm)) return;
   const auto along_cm = [&](const Pose& pose) {
     double along = 0.0;
     without_move_along(prediction.start, pose, weakest, &along);
     return along;
   };
+  const double slid_cm = along_cm(match.kept().world_from_data);
+  if (!(std::abs(slid_cm) > bound_cm)) return;
+  Prediction here;
+  here.start = without_move_along(prediction.start, match.kept().world_from_data, weakest);
+  here.start_bound_cm = static_cast<float>(bound_cm);
   const LastMetascan first_metascan = last_metascan_;  // a second match not kept changes nothing
   ScanMatch second = match_from(i, here, convergence);
   step1_iterations_ += second.iterations;

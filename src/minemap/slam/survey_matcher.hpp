@@ -108,9 +108,10 @@ class SurveyMatcher {
   /// (MotionSettings::slide_constraint) and that moved the scan along it more than the pair bound
   /// from the prediction: matched again from the prediction with that move taken out (the rest of
   /// its correction kept), at the pair bound. A narrow-field hand-held sensor in a corridor slides
-  /// metres along it from a wide first match, and fits as well there. The second is kept when
-  /// trusted and nearer the prediction along that direction: of two fits the surfaces cannot tell
-  /// apart, the one the motion model expects (its note says so).
+  /// metres along it from a wide first match, and is trusted there. The second is kept when
+  /// trusted, nearer the prediction along that direction, and a clearly closer fit (its pairs' RMS
+  /// under MotionSettings::slide_rms_factor of the first's); its note says so. A second match not
+  /// kept changes nothing.
   void prefer_prediction_along_slide(std::size_t i, const Prediction& prediction, ScanMatch& match,
                                      Convergence convergence);
   /// Whether scan i may be recovered: recovery on, scan i-1 registered.
