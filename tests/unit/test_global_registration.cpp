@@ -7,6 +7,8 @@
 #include <Eigen/Geometry>
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <random>
 
 #include "minemap/backend/cpu_backend.hpp"
 #include "minemap/io/formats.hpp"
@@ -134,6 +136,65 @@ TEST(GlobalRegistration, AScanOfAnotherPlaceIsNotFound) {
               found.correspondences, found.inliers, found.rival_inliers, found.why_not.c_str());
   EXPECT_FALSE(found.found);
   EXPECT_FALSE(found.why_not.empty());
+}
+
+// The feature pairs against a plain scan in the order feature_pairs documents (squared L2 summed
+// bin by bin, the first of equals; kept where mutual, all when too few are): the search sums four
+// model features at once and leaves a block early, and must choose exactly as the scan. Features
+// drawn from a few prototypes plus noise (many near-equal distances), with exact copies (ties) and
+// an odd count (a padded last block).
+TEST(GlobalRegistration, FeaturePairsAreThePlainScansToTheLastBit) {
+  std::mt19937 random(7);
+  std::uniform_real_distribution<float> uniform(0.0f, 1.0f);
+  std::vector<Fpfh> prototypes(12);
+  for (auto& p : prototypes) {
+    for (float& v : p) v = 30.0f * uniform(random);
+  }
+  const auto cloud_of = [&](std::size_t n) {
+    FeatureCloud cloud;
+    for (std::size_t k = 0; k < n; ++k) {
+      Fpfh f = prototypes[random() % prototypes.size()];
+      if (k % 7 == 3 && k > 0) {
+        f = cloud.features[k / 2];  // an exact copy of an earlier feature: a tie
+      } else {
+        for (float& v : f) v += 2.0f * uniform(random);
+      }
+      cloud.features.push_back(f);
+      cloud.points_cm.push_back(Eigen::Vector3f::Constant(float(k)));
+      cloud.normals.push_back(Eigen::Vector3f::UnitZ());
+    }
+    return cloud;
+  };
+  const FeatureCloud data = cloud_of(301), model = cloud_of(457);
+  const auto plain_nearest = [](const Fpfh& f, const std::vector<Fpfh>& to) {
+    float best = std::numeric_limits<float>::infinity();
+    std::uint32_t nearest = 0;
+    for (std::size_t j = 0; j < to.size(); ++j) {
+      float d2 = 0.0f;
+      for (int b = 0; b < kFpfhBins; ++b) {
+        const float d = f[b] - to[j][b];
+        d2 += d * d;
+      }
+      if (d2 < best) {
+        best = d2;
+        nearest = std::uint32_t(j);
+      }
+    }
+    return nearest;
+  };
+  for (const std::size_t max_data : {std::size_t{0}, std::size_t{50}}) {
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> all, mutual;
+    const std::size_t stride = max_data > 0 ? (data.size() + max_data - 1) / max_data : 1;
+    for (std::size_t i = 0; i < data.size(); i += stride) {
+      const std::uint32_t forward = plain_nearest(data.features[i], model.features);
+      all.emplace_back(std::uint32_t(i), forward);
+      if (plain_nearest(model.features[forward], data.features) == i) mutual.emplace_back(std::uint32_t(i), forward);
+    }
+    ASSERT_GT(mutual.size(), 10u);
+    ASSERT_LT(mutual.size(), all.size());
+    EXPECT_EQ(feature_pairs(data, model, 3, max_data), mutual) << max_data;
+    EXPECT_EQ(feature_pairs(data, model, mutual.size() + 1, max_data), all) << max_data;
+  }
 }
 
 TEST(GlobalRegistration, BadSettingsAreNamed) {

@@ -8,6 +8,9 @@
 #include <limits>
 #include <random>
 #include <stdexcept>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 
 #include "minemap/registration/horn.hpp"
 #include "minemap/search/pair_sums.hpp"
@@ -17,27 +20,72 @@ namespace {
 
 using Pairs = std::vector<std::pair<std::uint32_t, std::uint32_t>>;
 
+/// `to`'s features four at a time, bin by bin: block k holds features 4k..4k+3, bin b of feature
+/// 4k+l at [k][b][l] (the last block padded with copies of the last feature, never chosen: a copy
+/// is not closer than its original, which comes first).
+using FeatureBlock = std::array<std::array<float, 4>, kFpfhBins>;
+
+std::vector<FeatureBlock> interleaved(const std::vector<Fpfh>& to) {
+  std::vector<FeatureBlock> blocks((to.size() + 3) / 4);
+  for (std::size_t j = 0; j < blocks.size() * 4; ++j) {
+    const Fpfh& f = to[std::min(j, to.size() - 1)];
+    for (int b = 0; b < kFpfhBins; ++b) blocks[j / 4][b][j % 4] = f[b];
+  }
+  return blocks;
+}
+
+/// The index of `f`'s nearest feature in `to` (squared L2, summed bin by bin in order; the first
+/// of equals), as a plain scan over `to` finds it. Four features are summed at once, lane by lane
+/// in the same order, so each distance is the scan's to the last bit. A block is left after a third
+/// or two thirds of the bins once all four partial sums reach the best so far: adding squares never
+/// lowers a float sum, so none of the four could have been closer.
+std::uint32_t nearest_feature(const Fpfh& f, const std::vector<FeatureBlock>& blocks, std::size_t count) {
+  float best = std::numeric_limits<float>::infinity();
+  std::uint32_t nearest = 0;
+  for (std::size_t k = 0; k < blocks.size(); ++k) {
+    const FeatureBlock& block = blocks[k];
+    std::array<float, 4> sums{};
+#if defined(__SSE2__)
+    __m128 sum = _mm_setzero_ps();
+    bool beyond = false;
+    for (int b = 0; b < kFpfhBins; ++b) {
+      const __m128 d = _mm_sub_ps(_mm_set1_ps(f[b]), _mm_loadu_ps(block[b].data()));
+      sum = _mm_add_ps(sum, _mm_mul_ps(d, d));
+      if ((b == 10 || b == 21) && _mm_movemask_ps(_mm_cmplt_ps(sum, _mm_set1_ps(best))) == 0) {
+        beyond = true;
+        break;
+      }
+    }
+    if (beyond) continue;
+    _mm_storeu_ps(sums.data(), sum);
+#else
+    for (int b = 0; b < kFpfhBins; ++b) {
+      for (int l = 0; l < 4; ++l) {
+        const float d = f[b] - block[b][l];
+        sums[l] += d * d;
+      }
+    }
+#endif
+    for (int l = 0; l < 4; ++l) {
+      const std::size_t j = 4 * k + std::size_t(l);
+      if (j < count && sums[l] < best) {
+        best = sums[l];
+        nearest = static_cast<std::uint32_t>(j);
+      }
+    }
+  }
+  return nearest;
+}
+
 /// For each feature `from[which[k]]`, the index of its nearest feature in `to` (squared L2; the
 /// first of equals). Brute force: a recovery's clouds hold thousands of features, not millions.
 std::vector<std::uint32_t> nearest_features(const std::vector<Fpfh>& from, std::span<const std::uint32_t> which,
                                             const std::vector<Fpfh>& to) {
   std::vector<std::uint32_t> nearest(which.size(), 0);
+  if (to.empty()) return nearest;
+  const std::vector<FeatureBlock> blocks = interleaved(to);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, which.size(), 16), [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t k = r.begin(); k < r.end(); ++k) {
-      const Fpfh& f = from[which[k]];
-      float best = std::numeric_limits<float>::infinity();
-      for (std::size_t j = 0; j < to.size(); ++j) {
-        float d2 = 0.0f;
-        for (int b = 0; b < kFpfhBins; ++b) {
-          const float d = f[b] - to[j][b];
-          d2 += d * d;
-        }
-        if (d2 < best) {
-          best = d2;
-          nearest[k] = static_cast<std::uint32_t>(j);
-        }
-      }
-    }
+    for (std::size_t k = r.begin(); k < r.end(); ++k) nearest[k] = nearest_feature(from[which[k]], blocks, to.size());
   });
   return nearest;
 }
