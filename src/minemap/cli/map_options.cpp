@@ -211,7 +211,8 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
   number(g, "--metascan-margin-cm", mapping.metascan_margin_cm,
          "Metascan: model points within the scan's box grown by the pair bound and this");
   number(g, "--local-map-cell-cm", mapping.motion.local_map_cell_cm,
-         "A moving sensor's sweeps: the metascan keeps one point per cell of this size, the nearest scan's (0 = all)");
+         "A moving sensor's scans (timed sweeps, or scans without odometry): the metascan keeps one point per cell of "
+         "this size, the nearest scan's (0 = all)");
   number(g, "--provisional-step-factor", mapping.motion.provisional_step_factor,
          "A sweep's first match, before its deskew is refined, converges at this many times --min-step-cm/-deg "
          "(1 = as any match)");

@@ -113,9 +113,11 @@ struct MotionSettings {
   /// bound of metres; docs/benchmarks.md, "Moving LiDAR", has the figures. Retries and loop matches
   /// (stop-and-go surveys' too) keep all points.
   bool wide_coarse_probe = true;
-  /// A sweep's metascan keeps at most one model point in each cell of this size (the nearest
-  /// scan's): a moving sensor's scans overlap tens of times, and a tree over all their points costs
-  /// more to build than the match it serves (KISS-ICP's voxel map thins the same way). 0: all.
+  /// A moving sensor's metascan (a timed sweep's, or a scan's that constant velocity places: no
+  /// odometry) keeps at most one model point in each cell of this size (the nearest scan's): its
+  /// scans overlap tens of times, and a tree over all their points costs more to build than the
+  /// match it serves (KISS-ICP's voxel map thins the same way). Stop-and-go surveys with odometry
+  /// keep every point, as the paper. 0: all. Figures: docs/benchmarks.md, "Moving LiDAR".
   double local_map_cell_cm = 10.0;
   /// A match that needed a retry and moved the scan's points more than this many times the RMS of
   /// the recent prediction errors (with at least confirm_min_history of them) is not trusted on its

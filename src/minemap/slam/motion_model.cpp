@@ -14,6 +14,11 @@ bool MotionPrediction::constant_velocity_at(const SurveyState& state, std::size_
   return false;
 }
 
+double MotionPrediction::local_map_cell_cm(const SurveyState& state, std::size_t i) const {
+  const bool moving = state.prepared(i).sweep_s > 0.0 || constant_velocity_at(state, i);
+  return moving ? settings_.motion.local_map_cell_cm : 0.0;
+}
+
 Pose MotionPrediction::file_pose(const SurveyState& state, std::size_t i, const Pose& world_from_points) {
   return world_from_points * state.points_from_file(i);
 }

@@ -165,7 +165,7 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, flo
   // is; the metascans made for each bound live until the scan is registered.
   const Pose frame = state_.pose(i - 1);
   const PreparedScan& scan = state_.prepared(i);
-  const double thin_cm = scan.sweep_s > 0.0 ? settings_.motion.local_map_cell_cm : 0.0;
+  const double thin_cm = motion_.local_map_cell_cm(state_, i);
   std::vector<std::shared_ptr<const PreparedCloud>> metascans;
   return registration_.register_scan(scan, start, [&](float bound_cm, const Pose& standing) {
     LastMetascan& last = last_metascan_;
