@@ -278,9 +278,7 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
                     "%s; a trusted match from %s ended %.0f cm from the prediction, %.0f cm / %.1f deg from the first: "
                     "kept",
                     what, second_start, translation_norm(correction), translation_norm(apart), rotation_angle_deg(apart));
-      second.health.correction_cm = translation_norm(correction);
-      second.health.correction_deg = rotation_angle_deg(correction);
-      second.health.moved_cm = rms_moved_cm(*scan.probe, prediction.start, found);
+      measure_from_prediction(i, prediction, second);
       second.health.note = text;
       match = std::move(second);
       return;
@@ -291,6 +289,13 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
     std::snprintf(text, sizeof text, "%s, and a second match from another start was not trusted: not confirmed", what);
   }
   keep_first_match(match, text);
+}
+
+void SurveyMatcher::measure_from_prediction(std::size_t i, const Prediction& prediction, ScanMatch& match) const {
+  const Pose correction = rigid_inverse(prediction.start) * match.kept().world_from_data;
+  match.health.correction_cm = translation_norm(correction);
+  match.health.correction_deg = rotation_angle_deg(correction);
+  match.health.moved_cm = rms_moved_cm(*state_.prepared(i).probe, prediction.start, match.kept().world_from_data);
 }
 
 void SurveyMatcher::keep_first_match(ScanMatch& match, const char* refuted) {
@@ -340,16 +345,13 @@ void SurveyMatcher::prefer_prediction_along_slide(std::size_t i, const Predictio
   }
   const Pose found = second.kept().world_from_data;
   const double second_cm = along_cm(found);
-  const Pose correction = rigid_inverse(prediction.start) * found;
   char text[400];
   std::snprintf(text, sizeof text,
                 "its first match slid %.0f cm from the prediction along the direction its surfaces pin least (%.3f "
                 "times the best, RMS %.1f cm); a match from the prediction along it ended %.0f cm along, RMS %.1f cm: "
                 "kept",
                 slid_cm, health.translation_constraint, health.rms_cm, second_cm, second.health.rms_cm);
-  second.health.correction_cm = translation_norm(correction);
-  second.health.correction_deg = rotation_angle_deg(correction);
-  second.health.moved_cm = rms_moved_cm(*state_.prepared(i).probe, prediction.start, found);
+  measure_from_prediction(i, prediction, second);
   second.health.note = health.note.empty() ? std::string(text) : health.note + "; " + text;
   match = std::move(second);
 }
@@ -424,11 +426,7 @@ void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMat
     return;
   }
   // Trusted. How far the prediction was off is measured from it (the adaptive bound learns from it).
-  const Pose found_pose = again.kept().world_from_data;
-  const Pose correction = rigid_inverse(prediction.start) * found_pose;
-  again.health.correction_cm = translation_norm(correction);
-  again.health.correction_deg = rotation_angle_deg(correction);
-  again.health.moved_cm = rms_moved_cm(*state_.prepared(i).probe, prediction.start, found_pose);
+  measure_from_prediction(i, prediction, again);
   again.health.recovered_inliers = found.global.inliers;
   match = std::move(again);
   start = found.start;

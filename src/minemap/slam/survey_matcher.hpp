@@ -98,6 +98,10 @@ class SurveyMatcher {
   /// against more of the map (after a loop) may answer the first match's doubt. A first match that
   /// jumped (no retry) stays where it is, doubtful (the reach test), with `refuted` said.
   static void keep_first_match(ScanMatch& match, const char* refuted);
+  /// How far a match that replaces the first one (from a second start) is from the prediction:
+  /// its health's correction_cm / _deg and moved_cm, measured from `prediction.start` (the adaptive
+  /// bound and the jump test learn from them), not from the second match's own start.
+  void measure_from_prediction(std::size_t i, const Prediction& prediction, ScanMatch& match) const;
   /// Scan i's match from the prediction failed or is doubtful (MappingSettings::recovery): it is
   /// registered again without a start and matched from there. Where both matches end at one pose
   /// and each doubt was one a start can cause (reach, surfaces apart, not settled), it is trusted.
