@@ -20,10 +20,11 @@ inline float mm_squared_distance_to_box(float3 q, float4 lo, float4 hi) {
 }
 
 // One query against one model: updates best (squared distance bound) and the hit, returns 1 when
-// a closer model point was found. `hit_position` is in the MODEL frame.
+// a closer model point was found. `hit_position` is in the MODEL frame. The exact search passes
+// over points whose original index lies in [skip_first, skip_first + skip_count) (SkippedPoints).
 inline int mm_search_model(float3 q, __global const int8* nodes, __global const float4* tree_points,
-                           __global const float4* leaf_means, const int method, float* best, int* hit_index,
-                           float3* hit_position) {
+                           __global const float4* leaf_means, const int method, const int skip_first,
+                           const int skip_count, float* best, int* hit_index, float3* hit_position) {
   int found = 0;
   if (method == MM_APPROXIMATE) {
     int node = 0;
@@ -76,7 +77,7 @@ inline int mm_search_model(float3 q, __global const int8* nodes, __global const 
     for (int i = n.s1, end = n.s1 + n.s2; i < end; ++i) {
       const float4 p = tree_points[i];
       const float d = mm_squared_distance(p.xyz, q);
-      if (d < *best) {
+      if (d < *best && (uint)(as_int(p.w) - skip_first) >= (uint)skip_count) {
         *best = d;
         *hit_index = as_int(p.w);
         *hit_position = p.xyz;
@@ -115,8 +116,9 @@ __kernel void nearest_in_tree(__global const float4* data, const int data_count,
                               const float4 box_lo, const float4 box_hi, const float4 to_model0,
                               const float4 to_model1, const float4 to_model2, const float4 to_data0,
                               const float4 to_data1, const float4 to_data2, const int method,
-                              const float max_squared_distance, const int model_id, const int first_model,
-                              __global float4* best_pair, __global int2* best_ref) {
+                              const int skip_first, const int skip_count, const float max_squared_distance,
+                              const int model_id, const int first_model, __global float4* best_pair,
+                              __global int2* best_ref) {
   const int i = get_global_id(0);
   if (i >= data_count) return;
   float best = mm_start_bound(i, max_squared_distance, first_model, best_pair, best_ref);
@@ -124,7 +126,7 @@ __kernel void nearest_in_tree(__global const float4* data, const int data_count,
   if (!(mm_squared_distance_to_box(q, box_lo, box_hi) < best)) return;
   int hit_index = -1;
   float3 hit = (float3)(0.0f);
-  if (mm_search_model(q, nodes, tree_points, leaf_means, method, &best, &hit_index, &hit)) {
+  if (mm_search_model(q, nodes, tree_points, leaf_means, method, skip_first, skip_count, &best, &hit_index, &hit)) {
     best_pair[i] = (float4)(mm_apply_rigid(to_data0, to_data1, to_data2, hit), best);
     best_ref[i] = (int2)(model_id, hit_index);
   }

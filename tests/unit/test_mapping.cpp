@@ -526,12 +526,15 @@ TEST(MappingSimulatedMine, AScanLetGoOfGivesTheModelPointsItHeld) {
   EXPECT_EQ(state.prepared(0).model_cloud->point_vector(), models[0]);  // and taken back, the same
 }
 
-// The judging after the loops searches a block of 16 scans in a row, all among a scan's
-// neighbours and standing at one place, as one tree (JudgingClouds): each point's nearest model point is the one the
-// neighbours' own trees give (the distance to a float's last bits: taken in the block's frame), and
-// the brute force's; the judged scan's own block and a ragged end are searched scan by scan. On
-// the OpenCL device the same trees give the host's distances bit for bit.
+// The judging after the loops searches a block of scans in a row standing at one place as one tree
+// (JudgingClouds), with the block's scans that are not among a judged scan's neighbours (the scan
+// itself, a run at either end) left out of the search: each point's nearest model point is the one
+// the neighbours' own trees give (the distance to a float's last bits: taken in the block's frame),
+// and the brute force's over the neighbours alone; where those left out are not one run, the
+// block is searched scan by scan. On the OpenCL device the same trees give the host's distances
+// bit for bit.
 TEST(MappingJudging, BlocksOfScansInARowFindWhatEachScansOwnTreeFinds) {
+  static_assert(detail::JudgingClouds::kBlockScans > 40, "the survey below is one block");
   CpuBackend cpu;
   const MappingSettings settings;
   const auto fill = [&](ComputeBackend& backend, detail::SurveyState& state, double step_cm) {
@@ -548,81 +551,98 @@ TEST(MappingJudging, BlocksOfScansInARowFindWhatEachScansOwnTreeFinds) {
     }
   };
   detail::SurveyState state;
-  fill(cpu, state, 50.0);  // 16 scans in a row over 7.5 m: at one place (loops.max_distance_cm)
-  const std::size_t judged = 20;
-  std::vector<std::size_t> near;
-  for (std::size_t j = 0; j < state.size(); ++j) {
-    if (j != judged) near.push_back(j);
-  }
-  std::stable_sort(near.begin(), near.end(), [&](std::size_t a, std::size_t b) {
-    return (a > judged ? a - judged : judged - a) < (b > judged ? b - judged : judged - b);
-  });
-  const detail::LocalMap local_map(settings, cpu);
-  detail::JudgingClouds clouds(local_map);
-  const std::vector<WorldModel> blocks = clouds.models(state, near, judged);
-  // Scans 0-15: one block; 16-31 hold the judged scan: 15 trees; 32-39 are no whole block: 8.
-  EXPECT_EQ(blocks.size(), 1u + 15u + 8u);
-  EXPECT_EQ(clouds.held(), blocks.size());
-  std::vector<std::shared_ptr<const PreparedCloud>> own;
-  std::vector<WorldModel> each;
-  for (const std::size_t j : near) {
-    own.push_back(cpu.prepare(state.prepared(j).model_cloud->point_vector(), settings.tree));
-    each.push_back({own.back().get(), state.pose(j)});
-  }
-  const Pose& at = state.pose(judged);
-  const auto search = [&](ComputeBackend& backend, const PreparedCloud& data, const std::vector<WorldModel>& models) {
+  fill(cpu, state, 50.0);  // 50 cm steps: at one place (loops.max_distance_cm per 16 scans)
+  const auto search = [&](ComputeBackend& backend, const PreparedCloud& data, const std::vector<WorldModel>& models,
+                          const Pose& at) {
     std::vector<ModelPlacement> placed;
-    for (const WorldModel& m : models) placed.push_back({m.cloud, rigid_inverse(m.world_from_model) * at});
+    for (const WorldModel& m : models) placed.push_back({m.cloud, rigid_inverse(m.world_from_model) * at, m.skip});
     return backend.nearest(data, placed, SearchMethod::kExact, PairingSettings{200.0f});
   };
-  const PreparedCloud& data = *state.prepared(judged).probe;
-  const std::vector<NearestPair> by_block = search(cpu, data, blocks);
-  const std::vector<NearestPair> by_scan = search(cpu, data, each);
-  ASSERT_EQ(by_block.size(), data.points().size());
-  std::size_t paired = 0;
-  for (std::size_t k = 0; k < by_block.size(); ++k) {
-    // The brute force, in double in the world frame.
-    const Eigen::Vector3d p = at.block<3, 3>(0, 0) * data.points()[k].cast<double>() + at.block<3, 1>(0, 3);
-    double best = 200.0 * 200.0;
-    bool found = false;
+  const detail::LocalMap local_map(settings, cpu);
+  detail::JudgingClouds clouds(local_map);
+  // Each case: the judged scan, its neighbours (nearest first), and how many trees they take.
+  struct Case {
+    std::size_t judged;
+    std::size_t below;  // the neighbours: scans [0, below) but the judged one
+    std::size_t trees;
+  };
+  for (const Case& c : {Case{20, 40, 1}, Case{35, 30, 1}, Case{20, 30, 29}}) {
+    // 20 of 0-39: the block, 20 left out; 35 of 0-29: 30-39 left out (35 among them); 20 of 0-29:
+    // 20 and 30-39 are two runs, scan by scan.
+    std::vector<std::size_t> near;
+    for (std::size_t j = 0; j < c.below; ++j) {
+      if (j != c.judged) near.push_back(j);
+    }
+    std::stable_sort(near.begin(), near.end(), [&](std::size_t a, std::size_t b) {
+      return (a > c.judged ? a - c.judged : c.judged - a) < (b > c.judged ? b - c.judged : c.judged - b);
+    });
+    const std::vector<WorldModel> blocks = clouds.models(state, near, c.judged);
+    ASSERT_EQ(blocks.size(), c.trees) << "judged " << c.judged;
+    std::vector<std::shared_ptr<const PreparedCloud>> own;
+    std::vector<WorldModel> each;
     for (const std::size_t j : near) {
-      const Pose& pose = state.pose(j);
-      for (const Eigen::Vector3f& m : state.prepared(j).model_cloud->points()) {
-        const double d = (pose.block<3, 3>(0, 0) * m.cast<double>() + pose.block<3, 1>(0, 3) - p).squaredNorm();
-        if (d < best) {
-          best = d;
-          found = true;
+      own.push_back(cpu.prepare(state.prepared(j).model_cloud->point_vector(), settings.tree));
+      each.push_back({own.back().get(), state.pose(j)});
+    }
+    const Pose& at = state.pose(c.judged);
+    const PreparedCloud& data = *state.prepared(c.judged).probe;
+    const std::vector<NearestPair> by_block = search(cpu, data, blocks, at);
+    const std::vector<NearestPair> by_scan = search(cpu, data, each, at);
+    ASSERT_EQ(by_block.size(), data.points().size());
+    std::size_t paired = 0;
+    for (std::size_t k = 0; k < by_block.size(); ++k) {
+      // The brute force, in double in the world frame.
+      const Eigen::Vector3d p = at.block<3, 3>(0, 0) * data.points()[k].cast<double>() + at.block<3, 1>(0, 3);
+      double best = 200.0 * 200.0;
+      bool found = false;
+      for (const std::size_t j : near) {
+        const Pose& pose = state.pose(j);
+        for (const Eigen::Vector3f& m : state.prepared(j).model_cloud->points()) {
+          const double d = (pose.block<3, 3>(0, 0) * m.cast<double>() + pose.block<3, 1>(0, 3) - p).squaredNorm();
+          if (d < best) {
+            best = d;
+            found = true;
+          }
         }
       }
+      ASSERT_EQ(by_block[k].squared_distance_cm2 >= 0.0f, found) << "judged " << c.judged << ", point " << k;
+      ASSERT_EQ(by_scan[k].squared_distance_cm2 >= 0.0f, found) << "judged " << c.judged << ", point " << k;
+      if (!found) continue;
+      ++paired;
+      EXPECT_NEAR(by_block[k].squared_distance_cm2, best, 1e-5 * best + 1e-3) << "point " << k;
+      EXPECT_NEAR(by_block[k].squared_distance_cm2, by_scan[k].squared_distance_cm2, 1e-5 * best + 1e-3) << "point " << k;
     }
-    ASSERT_EQ(by_block[k].squared_distance_cm2 >= 0.0f, found) << "point " << k;
-    ASSERT_EQ(by_scan[k].squared_distance_cm2 >= 0.0f, found) << "point " << k;
-    if (!found) continue;
-    ++paired;
-    EXPECT_NEAR(by_block[k].squared_distance_cm2, best, 1e-5 * best + 1e-3) << "point " << k;
-    EXPECT_NEAR(by_block[k].squared_distance_cm2, by_scan[k].squared_distance_cm2, 1e-5 * best + 1e-3) << "point " << k;
+    EXPECT_GT(paired, by_block.size() / 2);
   }
-  EXPECT_GT(paired, by_block.size() / 2);
-  clouds.forget_unused(judged + detail::JudgingClouds::kKeptFor + 1);
+  EXPECT_EQ(clouds.held(), 1u + 29u);  // the block, and the scans of the last case
+  // The block was last used judging 35, the scans judging 20.
+  clouds.forget_unused(35 + detail::JudgingClouds::kKeptFor + 1);
   EXPECT_EQ(clouds.held(), 1u);  // the block outlives the judged scans of its own
-  clouds.forget_unused(judged + detail::JudgingClouds::kKeptFor + detail::JudgingClouds::kBlockScans + 1);
+  clouds.forget_unused(35 + detail::JudgingClouds::kKeptFor + detail::JudgingClouds::kBlockScans + 1);
   EXPECT_EQ(clouds.held(), 0u);
   // Scans 4 m apart (stop-and-go) are no place's: each searched in its own tree.
+  std::vector<std::size_t> near;
+  for (std::size_t j = 0; j < 40; ++j) {
+    if (j != 20) near.push_back(j);
+  }
   detail::SurveyState apart;
   fill(cpu, apart, 400.0);
   detail::JudgingClouds scan_by_scan(local_map);
-  EXPECT_EQ(scan_by_scan.models(apart, near, judged).size(), near.size());
+  EXPECT_EQ(scan_by_scan.models(apart, near, 20).size(), near.size());
   // The device's trees, searched on the device: the host's distances bit for bit.
   const std::unique_ptr<ComputeBackend> opencl = test::opencl_backend();  // throws without OpenCL: fails
   detail::SurveyState on_device;
   fill(*opencl, on_device, 50.0);
   const detail::LocalMap device_map(settings, *opencl);
   detail::JudgingClouds device_clouds(device_map);
-  const std::vector<NearestPair> device =
-      search(*opencl, *on_device.prepared(judged).probe, device_clouds.models(on_device, near, judged));
-  ASSERT_EQ(device.size(), by_block.size());
+  const std::vector<WorldModel> device_models = device_clouds.models(on_device, near, 20);
+  ASSERT_EQ(device_models.size(), 1u);
+  EXPECT_GT(device_models[0].skip.count, 0);
+  const std::vector<NearestPair> device = search(*opencl, *on_device.prepared(20).probe, device_models, on_device.pose(20));
+  const std::vector<NearestPair> host = search(cpu, *state.prepared(20).probe, clouds.models(state, near, 20), state.pose(20));
+  ASSERT_EQ(device.size(), host.size());
   for (std::size_t k = 0; k < device.size(); ++k) {
-    EXPECT_EQ(device[k].squared_distance_cm2, by_block[k].squared_distance_cm2) << "point " << k;
+    EXPECT_EQ(device[k].squared_distance_cm2, host[k].squared_distance_cm2) << "point " << k;
   }
 }
 

@@ -166,6 +166,60 @@ TEST_P(SearchTest, UnionOfModelsFindsTheClosestOverAll) {
   }
 }
 
+// A skip (ModelPlacement::skip) leaves a run of a model's points out, as if the tree never held
+// them: the exact search finds the nearest of the others (the brute force over them), never one
+// it left out, also where the left-out points crowd round every query (a judged scan's own points
+// in its block's tree), and pair_and_sum pairs as the union without them would. Only the exact
+// search takes one.
+TEST_P(SearchTest, ASkipLeavesItsPointsOutOfTheExactSearch) {
+  // Points 1000-2999 (a scan in the middle of a block) lie round the queries; the others farther.
+  std::vector<Eigen::Vector3f> model = random_cloud(1000, -500.f, 500.f, 31);
+  const std::vector<Eigen::Vector3f> queries = random_cloud(1500, -400.f, 400.f, 32);
+  for (std::size_t k = 0; k < 2000; ++k) model.push_back(queries[k % queries.size()] + Eigen::Vector3f(0.3f, 0.0f, 0.0f));
+  const std::vector<Eigen::Vector3f> after = random_cloud(1000, -500.f, 500.f, 33);
+  model.insert(model.end(), after.begin(), after.end());
+  auto tree = backend_->prepare(model, {});
+  auto data = backend_->prepare(queries, {});
+  const SkippedPoints skip{1000, 2000};
+  std::vector<Eigen::Vector3f> kept(model.begin(), model.begin() + 1000);
+  kept.insert(kept.end(), after.begin(), after.end());
+  auto without = backend_->prepare(kept, {});
+  const ModelPlacement skipping{tree.get(), Pose::Identity(), skip};
+  const ModelPlacement plain{without.get(), Pose::Identity()};
+  const float bound = 80.0f;
+  const auto pairs = backend_->nearest(*data, {&skipping, 1}, SearchMethod::kExact, {bound});
+  const auto expected = backend_->nearest(*data, {&plain, 1}, SearchMethod::kExact, {bound});
+  int paired = 0;
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    const double oracle = oracle_squared_distance(kept, queries[i]);
+    if (oracle < bound * bound * 0.999) {
+      ASSERT_GE(pairs[i].squared_distance_cm2, 0.0f) << "query " << i;
+      EXPECT_NEAR(pairs[i].squared_distance_cm2, oracle, 1e-3 * (1.0 + oracle)) << "query " << i;
+      EXPECT_FALSE(skip.leaves_out(pairs[i].model_point)) << "query " << i << " paired a point left out";
+      ++paired;
+    } else if (oracle > bound * bound * 1.001) {
+      EXPECT_LT(pairs[i].squared_distance_cm2, 0.0f) << "query " << i;
+    }
+    // The same points, so the same distances bit for bit as the tree without them.
+    EXPECT_EQ(pairs[i].squared_distance_cm2, expected[i].squared_distance_cm2) << "query " << i;
+  }
+  EXPECT_GT(paired, 300);
+  const PairSums sums = backend_->pair_and_sum(*data, {&skipping, 1}, SearchMethod::kExact, {bound});
+  const PairSums sums_without = backend_->pair_and_sum(*data, {&plain, 1}, SearchMethod::kExact, {bound});
+  EXPECT_EQ(sums.count, double(paired));
+  EXPECT_EQ(sums.count, sums_without.count);
+  EXPECT_EQ(sums.sum_squared_distance_cm2, sums_without.sum_squared_distance_cm2);
+  EXPECT_EQ(sums.sum_data_model, sums_without.sum_data_model);
+  // With no skip the crowding points are found (the skip did the leaving out).
+  const ModelPlacement whole{tree.get(), Pose::Identity()};
+  const auto all = backend_->nearest(*data, {&whole, 1}, SearchMethod::kExact, {bound});
+  EXPECT_TRUE(skip.leaves_out(all[0].model_point));
+  for (auto method : {SearchMethod::kApproximate, SearchMethod::kBruteForce}) {
+    EXPECT_THROW(backend_->nearest(*data, {&skipping, 1}, method, {bound}), std::invalid_argument) << to_string(method);
+    EXPECT_THROW(backend_->pair_and_sum(*data, {&skipping, 1}, method, {bound}), std::invalid_argument) << to_string(method);
+  }
+}
+
 TEST_P(SearchTest, SumsMatchDoubleReferenceFarFromOrigin) {
   // A cloud 1 km from the origin: centred sums keep full accuracy.
   auto model_points = random_cloud(20000, -500.f, 500.f, 9);
@@ -270,6 +324,15 @@ TEST(SearchBackends, CpuAndOpenClFindTheSameDistances) {
     }
     // Contraction is off in the kernels and the C++ build: the distances agree bit for bit.
     EXPECT_EQ(mismatches, 0) << to_string(method);
+  }
+  // ... and with a run of the model's points left out (SkippedPoints), the same points found.
+  const ModelPlacement cp{cm.get(), placement_pose, {5000, 7000}};
+  const ModelPlacement gp{gm.get(), placement_pose, {5000, 7000}};
+  const auto a = cpu->nearest(*cd, {&cp, 1}, SearchMethod::kExact, {40.f});
+  const auto b = device->nearest(*gd, {&gp, 1}, SearchMethod::kExact, {40.f});
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a[i].squared_distance_cm2, b[i].squared_distance_cm2) << "query " << i;
+    ASSERT_EQ(a[i].model_point, b[i].model_point) << "query " << i;
   }
 }
 

@@ -466,6 +466,7 @@ class OpenClBackend final : public ComputeBackend {
   /// Launches the search for every model; false when no model could pair anything (all empty).
   bool search(const OpenClPreparedCloud& cloud, cl_int n, std::span<const ModelPlacement> models, SearchMethod method,
               const PairingSettings& settings) {
+    require_exact_search_for_skips(models, method);
     reserve_scratch(static_cast<std::size_t>(n));
     const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
     bool first = true;
@@ -509,6 +510,8 @@ class OpenClBackend final : public ComputeBackend {
         for (const auto& row : to_model) kernel.setArg(arg++, row);
         for (const auto& row : to_data) kernel.setArg(arg++, row);
         kernel.setArg(arg++, static_cast<cl_int>(method == SearchMethod::kApproximate ? 1 : 0));
+        kernel.setArg(arg++, static_cast<cl_int>(models[k].skip.first));
+        kernel.setArg(arg++, static_cast<cl_int>(models[k].skip.count));
         kernel.setArg(arg++, max_squared);
         kernel.setArg(arg++, model_id);
         kernel.setArg(arg++, first_model);

@@ -28,16 +28,19 @@ struct PlacedModel {
   const KdTree* tree;
   detail::RigidF model_from_data;
   detail::RigidF data_from_model;
+  SkippedPoints skip;
 };
 
-std::vector<PlacedModel> place_models(std::span<const ModelPlacement> models) {
+std::vector<PlacedModel> place_models(std::span<const ModelPlacement> models, SearchMethod method) {
+  require_exact_search_for_skips(models, method);
   std::vector<PlacedModel> placed;
   placed.reserve(models.size());
   for (const auto& m : models) {
     const Pose inverse = rigid_inverse(m.model_from_data);
     placed.push_back({&m.model->tree(),
                       {m.model_from_data.block<3, 3>(0, 0).cast<float>(), m.model_from_data.block<3, 1>(0, 3).cast<float>()},
-                      {inverse.block<3, 3>(0, 0).cast<float>(), inverse.block<3, 1>(0, 3).cast<float>()}});
+                      {inverse.block<3, 3>(0, 0).cast<float>(), inverse.block<3, 1>(0, 3).cast<float>()},
+                      m.skip});
   }
   return placed;
 }
@@ -67,7 +70,7 @@ NearestPair find_nearest(const Eigen::Vector3f& p, const std::vector<PlacedModel
     }
     std::int32_t hit = -1;
     if (method == SearchMethod::kExact) {
-      detail::exact_nearest(*model.tree, q, best, hit, hints[k]);
+      detail::exact_nearest(*model.tree, q, best, hit, hints[k], model.skip);
       if (hit >= 0) hints[k] = hit;
     } else {
       detail::brute_force_nearest(*model.tree, q, best, hit);
@@ -100,7 +103,7 @@ std::vector<std::shared_ptr<const PreparedCloud>> CpuBackend::prepare_many(
 
 PairSums CpuBackend::pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
                                   const PairingSettings& settings) {
-  const auto placed = place_models(models);
+  const auto placed = place_models(models, method);
   const auto points = data.points();
   const Eigen::Vector3d reference = data.centroid_cm();
   const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
@@ -134,7 +137,7 @@ PairSums CpuBackend::pair_and_sum(const PreparedCloud& data, std::span<const Mod
 
 std::vector<NearestPair> CpuBackend::nearest(const PreparedCloud& data, std::span<const ModelPlacement> models,
                                              SearchMethod method, const PairingSettings& settings) {
-  const auto placed = place_models(models);
+  const auto placed = place_models(models, method);
   const auto points = data.points();
   const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
   std::vector<NearestPair> result(points.size());

@@ -30,7 +30,7 @@ RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedClo
   std::vector<ModelPlacement> placed;
   placed.reserve(models.size());
   for (const WorldModel& model : models) {
-    placed.push_back({model.cloud, rigid_inverse(model.world_from_model) * world_from_data});
+    placed.push_back({model.cloud, rigid_inverse(model.world_from_model) * world_from_data, model.skip});
   }
   const float bound = icp.max_pair_dist_cm;
   const std::vector<NearestPair> nearest =

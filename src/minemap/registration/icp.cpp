@@ -140,7 +140,7 @@ class IcpRun {
   /// bound, over the union of the models.
   PairSums pair(SearchMethod method, float bound_cm) {
     placed_.clear();
-    for (const auto& m : models_) placed_.push_back({m.cloud, rigid_inverse(m.world_from_model) * pose_});
+    for (const auto& m : models_) placed_.push_back({m.cloud, rigid_inverse(m.world_from_model) * pose_, m.skip});
     return backend_.pair_and_sum(data_, placed_, method, PairingSettings{bound_cm});
   }
 
@@ -222,7 +222,7 @@ IcpResult register_icp(ComputeBackend& backend, const PreparedCloud& data, const
 
 std::size_t count_pairs(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
                         const WorldModel& model, float max_pair_dist_cm) {
-  const ModelPlacement placed{model.cloud, rigid_inverse(model.world_from_model) * world_from_data};
+  const ModelPlacement placed{model.cloud, rigid_inverse(model.world_from_model) * world_from_data, model.skip};
   return static_cast<std::size_t>(
       backend.pair_and_sum(data, {&placed, 1}, SearchMethod::kExact, PairingSettings{max_pair_dist_cm}).count);
 }

@@ -86,6 +86,7 @@ struct IcpResult {
 struct WorldModel {
   const PreparedCloud* cloud = nullptr;
   Pose world_from_model = Pose::Identity();
+  SkippedPoints skip{};  ///< points the search leaves out (exact search only: ModelPlacement::skip)
 };
 
 /// Registers `data` (initially at `world_from_data`) against the union of `models`. The clouds

@@ -47,6 +47,23 @@ struct KdPoint {
 };
 static_assert(sizeof(KdPoint) == 16);
 
+/// Model points a search leaves out: those whose original index (their place in the model cloud
+/// as prepared) lies in [first, first + count). One tree over several scans' union then serves a
+/// search that must not see one of them (the judging after the loops: a scan's own points in its
+/// block's tree). Exact search only (the approximate kd-tree's bucket means and the brute force
+/// take no skip: ComputeBackend::nearest and pair_and_sum refuse one). A bucket of copies of one
+/// point is searched as its first copy (KdNode), so it is left out when that copy is: copies of one
+/// point from a skipped and a kept scan would have to be the same float coordinates.
+struct SkippedPoints {
+  std::int32_t first = 0;
+  std::int32_t count = 0;  ///< 0: none left out
+  bool leaves_out(std::int32_t original_index) const {
+    return static_cast<std::uint32_t>(original_index) - static_cast<std::uint32_t>(first) <
+           static_cast<std::uint32_t>(count);
+  }
+  bool operator==(const SkippedPoints&) const = default;
+};
+
 /// An immutable bucket kd-tree over a float cloud. Thread-safety: const after construction, so any
 /// number of threads may search it at once. Units: those of the input points (cm in minemap).
 class KdTree {

@@ -13,6 +13,16 @@ SearchMethod parse_search_method(const std::string& text) {
   return parse_named(kSearchMethodNames, text, "search method");
 }
 
+void require_exact_search_for_skips(std::span<const ModelPlacement> models, SearchMethod method) {
+  if (method == SearchMethod::kExact) return;
+  for (const ModelPlacement& model : models) {
+    if (model.skip.count > 0) {
+      throw std::invalid_argument(std::string("model points are left out (ModelPlacement::skip) only by the exact search, not ") +
+                                  to_string(method));
+    }
+  }
+}
+
 PreparedCloud::PreparedCloud(std::vector<Eigen::Vector3f> points, const KdTreeSettings& tree_settings,
                              TreeBuild when)
     : points_(std::move(points)), tree_settings_(tree_settings) {

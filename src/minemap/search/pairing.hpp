@@ -105,6 +105,11 @@ class PreparedCloud {
 struct ModelPlacement {
   const PreparedCloud* model = nullptr;
   Pose model_from_data = Pose::Identity();  ///< T_model_data
+  SkippedPoints skip{};
 };
+
+/// Throws std::invalid_argument when a model leaves points out (ModelPlacement::skip) and the
+/// search is not exact: the backends' one check, before any search.
+void require_exact_search_for_skips(std::span<const ModelPlacement> models, SearchMethod method);
 
 }  // namespace minemap

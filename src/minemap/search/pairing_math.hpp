@@ -53,9 +53,11 @@ inline float squared_distance_to_bounds(const KdTree& tree, const Eigen::Vector3
 /// Scans tree points [begin, end) for one closer than `best` (strict '<', first wins), updating
 /// `best` and `best_point` exactly as a sequential scan would. With SSE2, four points are tested
 /// at once and a group with no closer point costs one mask test; the same float operations in the
-/// same order keep the distances bit-identical to the scalar path and to the OpenCL kernel.
+/// same order keep the distances bit-identical to the scalar path and to the OpenCL kernel. With
+/// kSkips, a point `skip` leaves out is passed over as if it were not in the tree.
+template <bool kSkips = false>
 inline void scan_bucket(const KdPoint* points, std::int32_t begin, std::int32_t end, const Eigen::Vector3f& q,
-                        float& best, std::int32_t& best_point) {
+                        float& best, std::int32_t& best_point, SkippedPoints skip = {}) {
   std::int32_t i = begin;
 #if defined(__SSE2__)
   const __m128 qx = _mm_set1_ps(q.x()), qy = _mm_set1_ps(q.y()), qz = _mm_set1_ps(q.z());
@@ -71,7 +73,7 @@ inline void scan_bucket(const KdPoint* points, std::int32_t begin, std::int32_t 
     alignas(16) float lanes[4];
     _mm_store_ps(lanes, d);
     for (int k = 0; k < 4; ++k) {
-      if (lanes[k] < best) {
+      if (lanes[k] < best && !(kSkips && skip.leaves_out(points[i + k].original_index))) {
         best = lanes[k];
         best_point = i + k;
       }
@@ -80,7 +82,7 @@ inline void scan_bucket(const KdPoint* points, std::int32_t begin, std::int32_t 
 #endif
   for (; i < end; ++i) {
     const float d = squared_distance(points[i], q);
-    const bool closer = d < best;
+    const bool closer = d < best && !(kSkips && skip.leaves_out(points[i].original_index));
     best = closer ? d : best;
     best_point = closer ? i : best_point;
   }
@@ -108,8 +110,11 @@ inline constexpr float kHintBoundMargin = 1.0f / 4096.0f;
 /// the first closest point is still visited (its lower bound is at most that distance plus the lower
 /// bound's rounding, below the tightened bound). So the result is bit-for-bit the unhinted one (the
 /// OpenCL kernel's, which has no hint): same point, ties included.
-inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& best, std::int32_t& best_point,
-                          std::int32_t hint = -1) {
+///
+/// `skip` leaves points out (SkippedPoints) as the kernel does: a hint must be a point it keeps.
+template <bool kSkips>
+inline void exact_nearest_in(const KdTree& tree, const Eigen::Vector3f& q, float& best, std::int32_t& best_point,
+                             std::int32_t hint, SkippedPoints skip) {
   const KdPoint* points = tree.points().data();
   if (hint >= 0) {
     const float hint_bound = std::nextafter(squared_distance(points[hint], q) * (1.0f + kHintBoundMargin),
@@ -148,7 +153,7 @@ inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& b
       node = go_left ? n.a : n.b;
     }
     const KdNode& leaf = nodes[node];
-    scan_bucket(points, leaf.a, leaf.a + leaf.b, q, best, best_point);
+    scan_bucket<kSkips>(points, leaf.a, leaf.a + leaf.b, q, best, best_point, skip);
     do {
       if (top == 0) return;
       --top;
@@ -159,6 +164,16 @@ inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& b
     offset[0] = next.offset[0];
     offset[1] = next.offset[1];
     offset[2] = next.offset[2];
+  }
+}
+
+inline void exact_nearest(const KdTree& tree, const Eigen::Vector3f& q, float& best, std::int32_t& best_point,
+                          std::int32_t hint = -1, SkippedPoints skip = {}) {
+  // Two traversals, so that the matching's searches (no skip) pay nothing for the judging's.
+  if (skip.count > 0) {
+    exact_nearest_in<true>(tree, q, best, best_point, hint, skip);
+  } else {
+    exact_nearest_in<false>(tree, q, best, best_point, hint, skip);
   }
 }
 

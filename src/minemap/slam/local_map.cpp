@@ -4,6 +4,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <bit>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -187,8 +188,8 @@ std::shared_ptr<const PreparedCloud> LocalMap::union_of(const SurveyState& state
 }
 
 std::shared_ptr<const PreparedCloud> LocalMap::whole_union(const SurveyState& state,
-                                                           const std::vector<std::size_t>& scans,
-                                                           const Pose& frame) const {
+                                                           const std::vector<std::size_t>& scans, const Pose& frame,
+                                                           std::vector<std::int32_t>* starts) const {
   const Pose frame_inverse = rigid_inverse(frame);
   std::vector<ModelPoints> models;
   models.reserve(scans.size());
@@ -199,23 +200,39 @@ std::shared_ptr<const PreparedCloud> LocalMap::whole_union(const SurveyState& st
   }
   const double everywhere = std::numeric_limits<double>::max();  // finite: kernels may assume finite math
   const Eigen::Vector3d lowest = Eigen::Vector3d::Constant(-everywhere), highest = Eigen::Vector3d::Constant(everywhere);
-  return backend_.prepare(concatenated(backend_.placed_within(placed, lowest, highest)), settings_.tree);
+  const std::vector<std::vector<Eigen::Vector3f>> parts = backend_.placed_within(placed, lowest, highest);
+  if (starts != nullptr) {
+    starts->assign(1, 0);
+    for (const auto& part : parts) starts->push_back(starts->back() + static_cast<std::int32_t>(part.size()));
+  }
+  return backend_.prepare(concatenated(parts), settings_.tree);
 }
 
 std::vector<WorldModel> JudgingClouds::models(const SurveyState& state, const std::vector<std::size_t>& near,
                                               std::size_t judged) {
-  std::unordered_map<std::size_t, std::size_t> in_block;  // block -> how many of near it holds
-  for (const std::size_t j : near) ++in_block[j / kBlockScans];
+  static_assert(kBlockScans <= 64, "a block's scans are bits of one word");
+  std::unordered_map<std::size_t, std::uint64_t> in_block;  // block -> which of its scans are in near (bits)
+  for (const std::size_t j : near) in_block[j / kBlockScans] |= std::uint64_t{1} << (j % kBlockScans);
   std::vector<WorldModel> models;
-  std::unordered_map<std::size_t, bool> placed;
+  std::unordered_map<std::size_t, bool> whole;  // block -> searched as one tree (else scan by scan)
   for (const std::size_t j : near) {
     const std::size_t b = j / kBlockScans;
-    if (in_block[b] < kBlockScans || !at_one_place(state, b)) {
-      models.push_back({scan(state, j, judged), state.pose(j)});
-    } else if (!placed[b]) {
-      placed[b] = true;
-      models.push_back({block(state, b, judged), state.pose(b * kBlockScans)});
+    const auto [at, first_of_block] = whole.try_emplace(b, false);
+    if (first_of_block && at_one_place(state, b)) {
+      // The block's scans not in near (the judged scan, or a run at either end): one run, left out.
+      const std::size_t size = std::min(kBlockScans, state.size() - b * kBlockScans);
+      const std::uint64_t all = size == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << size) - 1;
+      const std::uint64_t out = all & ~in_block[b];
+      const int first = out == 0 ? 0 : std::countr_zero(out);
+      const int last = out == 0 ? -1 : 63 - std::countl_zero(out);
+      at->second = std::popcount(out) == last - first + 1;
+      if (at->second) {
+        const Held& held = block(state, b, judged);
+        const SkippedPoints skip{held.starts[std::size_t(first)], held.starts[std::size_t(last + 1)] - held.starts[std::size_t(first)]};
+        models.push_back({held.cloud.get(), state.pose(b * kBlockScans), skip});
+      }
     }
+    if (!at->second) models.push_back({scan(state, j, judged), state.pose(j)});
   }
   return models;
 }
@@ -236,23 +253,24 @@ bool JudgingClouds::at_one_place(const SurveyState& state, std::size_t b) {
   auto [at, fresh] = one_place_.try_emplace(b, false);
   if (fresh) {
     double path_cm = 0.0;
-    for (std::size_t j = b * kBlockScans + 1; j < (b + 1) * kBlockScans; ++j) {
+    for (std::size_t j = b * kBlockScans + 1; j < std::min(state.size(), (b + 1) * kBlockScans); ++j) {
       path_cm += (state.pose(j).block<3, 1>(0, 3) - state.pose(j - 1).block<3, 1>(0, 3)).norm();
     }
-    at->second = path_cm <= local_map_.settings_.loops.max_distance_cm;
+    const double scans = double(std::min(state.size(), (b + 1) * kBlockScans) - b * kBlockScans);
+    at->second = path_cm * double(kOnePlaceScans) <= local_map_.settings_.loops.max_distance_cm * scans;
   }
   return at->second;
 }
 
-const PreparedCloud* JudgingClouds::block(const SurveyState& state, std::size_t b, std::size_t judged) {
+const JudgingClouds::Held& JudgingClouds::block(const SurveyState& state, std::size_t b, std::size_t judged) {
   auto [at, fresh] = blocks_.try_emplace(b);
   if (fresh) {
-    std::vector<std::size_t> scans(kBlockScans);
+    std::vector<std::size_t> scans(std::min(kBlockScans, state.size() - b * kBlockScans));
     for (std::size_t k = 0; k < scans.size(); ++k) scans[k] = b * kBlockScans + k;
-    at->second.cloud = local_map_.whole_union(state, scans, state.pose(scans.front()));
+    at->second.cloud = local_map_.whole_union(state, scans, state.pose(scans.front()), &at->second.starts);
   }
   at->second.last_used = judged;
-  return at->second.cloud.get();
+  return at->second;
 }
 
 void JudgingClouds::forget_unused(std::size_t judged) {

@@ -69,9 +69,11 @@ class LocalMap {
                                                 const Pose& at, double grow_cm, double thin_cm = 0.0) const;
 
   /// One kd-tree, in the frame `frame`, of all the model points of `scans` (where they stand),
-  /// concatenated in the order given: none cropped, none thinned.
+  /// concatenated in the order given: none cropped, none thinned. `starts`, when given, gets where
+  /// each scan's points begin in the union (their original indices), and the union's size last.
   std::shared_ptr<const PreparedCloud> whole_union(const SurveyState& state, const std::vector<std::size_t>& scans,
-                                                   const Pose& frame) const;
+                                                   const Pose& frame,
+                                                   std::vector<std::int32_t>* starts = nullptr) const;
 
  private:
   const MappingSettings& settings_;
@@ -82,36 +84,42 @@ class LocalMap {
 
 /// The model clouds the judging after the loops searches, each with a kd-tree of its own, built
 /// the first time a judged scan needs it and let go of once the scans judged since have not needed
-/// it: a scan's model points in its own frame, or a block's (kBlockScans scans in a row standing at
-/// one place, all among a judged scan's neighbours) in its first scan's frame. Scans in a row are judged against nearly
-/// the same neighbours, so each judged scan builds the trees of the few that came into reach. The
-/// judge reads distances only, and the exact search over these trees finds each probe point's
-/// nearest model point as one tree over the neighbours' union would (to the last bits of a float:
-/// each distance is taken in its tree's frame), without the union's crop to the scan's box grown by
-/// the pair bound (docs/scaling.md, "Loops at scale").
+/// it: a block's (kBlockScans scans in a row standing at one place) in its first scan's frame, or a
+/// scan's model points in its own frame. A block is searched as one tree whenever those of its
+/// scans that are not among a judged scan's neighbours form one run (the judged scan itself, or the
+/// block's first or last few): that run's points are left out of the search (SkippedPoints), so
+/// each probe point's nearest model point is the one among the neighbours' points, as one tree over
+/// the neighbours' union would find it (to the last bits of a float: each distance is taken in its
+/// tree's frame), without the union's crop to the scan's box grown by the pair bound
+/// (docs/scaling.md, "Loops at scale"). The judge reads distances only.
 ///
 /// Thread-safety: one thread. The scans must not move while it lives (one per judging pass): the
 /// clouds and whether a block stands at one place are kept as first found.
 class JudgingClouds {
  public:
-  /// How many scans in a row (indices kBlockScans b ... kBlockScans b + kBlockScans - 1) one block
-  /// tree holds. A dense sequence (hand-held keyframes, sweeps half a second apart) judges each scan
-  /// against hundreds of neighbours, each probe point searched in every tree; they come in runs of
-  /// the drive, so most of them fill whole blocks, one search each. Only blocks whose scans stand at
-  /// one place (their drive no longer than loops.max_distance_cm, a loop candidate's distance):
-  /// stop-and-go scans metres apart see different stretches of the mine, each scan's own box leaves
-  /// out more of the search than a block's, and the block's tree is one more to build (the figures:
-  /// docs/benchmarks.md, "The judging after the loops, in blocks").
-  static constexpr std::size_t kBlockScans = 16;
+  /// How many scans in a row (indices kBlockScans b ... kBlockScans b + kBlockScans - 1, the
+  /// survey's last block fewer) one block tree holds. A dense sequence (hand-held keyframes, sweeps
+  /// half a second apart) judges each scan against hundreds of neighbours, each probe point
+  /// searched in every tree; they come in runs of the drive, so most of them fill whole blocks, one
+  /// search each (64 against 16: 5 trees a judged scan against 20, docs/benchmarks.md, "The
+  /// judging after the loops, in blocks of 64").
+  static constexpr std::size_t kBlockScans = 64;
+  /// Only blocks whose scans stand at one place: their drive no longer than loops.max_distance_cm
+  /// (a loop candidate's distance) for each kOnePlaceScans of them, a mean step of 62.5 cm at the
+  /// default 10 m. Stop-and-go scans metres apart see different stretches of the mine, each scan's
+  /// own box leaves out more of the search than a block's, and the block's tree is one more to
+  /// build (docs/benchmarks.md, "The judging after the loops, in blocks").
+  static constexpr std::size_t kOnePlaceScans = 16;
   /// How many judged scans a cloud outlives its last use by: a scan comes back into reach after a
   /// few at most, and then its tree is not built again.
   static constexpr std::size_t kKeptFor = 8;
 
   explicit JudgingClouds(const LocalMap& local_map) : local_map_(local_map) {}
 
-  /// The clouds scan `judged` is judged against, `near` its neighbours (LocalMap::judging_scans):
-  /// one per block whose scans all are in `near`, one per other scan of `near`; in the order of
-  /// `near` (a block where the first of its scans stands), each with the world pose of its frame.
+  /// The clouds scan `judged` is judged against, `near` its neighbours (LocalMap::judging_scans,
+  /// without `judged`): one per block searched whole (above, with the points it leaves out), one
+  /// per other scan of `near`; in the order of `near` (a block where the first of its scans
+  /// stands), each with the world pose of its frame.
   std::vector<WorldModel> models(const SurveyState& state, const std::vector<std::size_t>& near, std::size_t judged);
   /// Lets go of the clouds none of the last kKeptFor judged scans used (a block's: kKeptFor + kBlockScans).
   void forget_unused(std::size_t judged);
@@ -122,9 +130,10 @@ class JudgingClouds {
   struct Held {
     std::shared_ptr<const PreparedCloud> cloud;
     std::size_t last_used = 0;
+    std::vector<std::int32_t> starts;  ///< a block's: where each scan's points begin, and its size
   };
   const PreparedCloud* scan(const SurveyState& state, std::size_t j, std::size_t judged);
-  const PreparedCloud* block(const SurveyState& state, std::size_t b, std::size_t judged);
+  const Held& block(const SurveyState& state, std::size_t b, std::size_t judged);
   /// Whether block b's scans stand at one place (kBlockScans), as they stand now.
   bool at_one_place(const SurveyState& state, std::size_t b);
 
