@@ -176,9 +176,10 @@ void LoopClosing::judge_again(SurveyState& state, const RunControl& control) con
   // The relaxation moved every scan: each is judged again where it ended, against the scans near it
   // (loops.judge_max_visits, judge_max_scans). A scan that looked doubtful against a few recent
   // scans (a corner that sees where the drive began) is then judged against the start too. The
-  // neighbours are searched in trees kept from scan to scan (JudgingClouds: one per block of 16
-  // in a row, else one per scan), not one tree over their union built for each judged scan: the
-  // judge's one pass over a scan's probe points never paid back that build (72 % of the judging).
+  // neighbours are searched in trees kept from scan to scan (JudgingClouds: one per block of 64
+  // in a row, the block's scans that are not neighbours left out of its search, else one per
+  // scan), not one tree over their union built for each judged scan: the judge's one pass over a
+  // scan's probe points never paid back that build (72 % of the judging).
   JudgingClouds clouds(local_map_);
   const std::shared_ptr<const PreparedCloud> nothing = backend_.prepare({}, settings_.tree);
   for (std::size_t k = 1; k < state.size() && !control.stop_requested(); ++k) {
