@@ -17,8 +17,9 @@ void require_exact_search_for_skips(std::span<const ModelPlacement> models, Sear
   if (method == SearchMethod::kExact) return;
   for (const ModelPlacement& model : models) {
     if (model.skip.count > 0) {
-      throw std::invalid_argument(std::string("model points are left out (ModelPlacement::skip) only by the exact search, not ") +
-                                  to_string(method));
+      throw std::invalid_argument(
+          std::string("model points are left out (ModelPlacement::skip) only by the exact search, not ") +
+          to_string(method));
     }
   }
 }

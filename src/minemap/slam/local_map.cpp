@@ -228,7 +228,8 @@ std::vector<WorldModel> JudgingClouds::models(const SurveyState& state, const st
       at->second = std::popcount(out) == last - first + 1;
       if (at->second) {
         const Held& held = block(state, b, judged);
-        const SkippedPoints skip{held.starts[std::size_t(first)], held.starts[std::size_t(last + 1)] - held.starts[std::size_t(first)]};
+        const std::int32_t from = held.starts[std::size_t(first)], to = held.starts[std::size_t(last + 1)];
+        const SkippedPoints skip{from, to - from};
         models.push_back({held.cloud.get(), state.pose(b * kBlockScans), skip});
       }
     }
