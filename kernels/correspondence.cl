@@ -178,7 +178,8 @@ __kernel void nearest_brute_force(__global const float4* data, const int data_co
 // local memory (work-group size a power of two) leaves one record of 17 floats per group. The host
 // adds the group records in double in group order: no atomics, the same bits every run.
 __kernel void pair_sums(__global const float4* data, __global const float4* best_pair, const int data_count,
-                        const float4 reference, __global float* partials, __local float* scratch) {
+                        const float4 reference, const float scale_squared, __global float* partials,
+                        __local float* scratch) {
   const int lid = get_local_id(0);
   const int wg = get_local_size(0);
   float acc[MM_SUM_TERMS];
@@ -190,15 +191,22 @@ __kernel void pair_sums(__global const float4* data, __global const float4* best
     const float3 m = pair.xyz - reference.xyz;
     const float pc[3] = {p.x, p.y, p.z};
     const float mc[3] = {m.x, m.y, m.z};
+    // The Geman-McClure weight (mm_robust_weight's, in float): 1 when the scale is 0.
+    float weight = 1.0f;
+    if (scale_squared > 0.0f) {
+      const float ratio = scale_squared / (scale_squared + pair.w);
+      weight = ratio * ratio;
+    }
     acc[MM_TERM_COUNT] += 1.0f;
     for (int r = 0; r < 3; ++r) {
-      acc[MM_TERM_SUM_DATA + r] += pc[r];
-      acc[MM_TERM_SUM_MODEL + r] += mc[r];
+      acc[MM_TERM_SUM_DATA + r] += weight * pc[r];
+      acc[MM_TERM_SUM_MODEL + r] += weight * mc[r];
     }
     for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) acc[MM_TERM_SUM_DATA_MODEL + 3 * r + c] += pc[r] * mc[c];
+      for (int c = 0; c < 3; ++c) acc[MM_TERM_SUM_DATA_MODEL + 3 * r + c] += weight * pc[r] * mc[c];
     }
     acc[MM_TERM_SUM_SQUARED_DISTANCE] += pair.w;
+    acc[MM_TERM_WEIGHT] += weight;
   }
   for (int t = 0; t < MM_SUM_TERMS; ++t) scratch[t * wg + lid] = acc[t];
   barrier(CLK_LOCAL_MEM_FENCE);
@@ -222,7 +230,7 @@ __kernel void pair_sums(__global const float4* data, __global const float4* best
 // where the device has cl_khr_fp64 (the host passes -DMM_HAVE_FP64); elsewhere pair_sums (float).
 __kernel void pair_sums_blocks(__global const float4* data, __global const float4* best_pair, const int data_count,
                                const double reference_x, const double reference_y, const double reference_z,
-                               __global double* partials) {
+                               const float scale_squared, __global double* partials) {
   const int b = get_global_id(0);
   const int begin = b * MM_PAIR_SUM_BLOCK;
   if (begin >= data_count) return;
@@ -235,7 +243,7 @@ __kernel void pair_sums_blocks(__global const float4* data, __global const float
     const float4 point = data[i];
     const double pc[3] = {(double)point.x - reference_x, (double)point.y - reference_y, (double)point.z - reference_z};
     const double mc[3] = {(double)pair.x - reference_x, (double)pair.y - reference_y, (double)pair.z - reference_z};
-    mm_add_point_to_point_terms(acc, pc, mc, pair.w);
+    mm_add_point_to_point_terms(acc, pc, mc, pair.w, mm_robust_weight(pair.w, scale_squared));
   }
   for (int t = 0; t < MM_SUM_TERMS; ++t) partials[b * MM_SUM_TERMS + t] = acc[t];
 }

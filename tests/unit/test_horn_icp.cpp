@@ -57,12 +57,35 @@ PairSums sums_from_pairs(const std::vector<Eigen::Vector3d>& data, const std::ve
   for (std::size_t i = 0; i < data.size(); ++i) {
     const Eigen::Vector3d p = data[i] - r, m = model[i] - r;
     s.count += 1.0;
+    s.weight += 1.0;
     s.sum_data += p;
     s.sum_model += m;
     s.sum_data_model += p * m.transpose();
     s.sum_squared_distance_cm2 += (p - m).squaredNorm();
   }
   return s;
+}
+
+/// Independent weighted least-squares rigid fit (weighted Kabsch via SVD, in double): minimises
+/// sum w_i |m_i - (R p_i + t)|^2.
+Pose weighted_kabsch(const std::vector<Eigen::Vector3d>& data, const std::vector<Eigen::Vector3d>& model,
+                     const std::vector<double>& w) {
+  Eigen::Vector3d cp = Eigen::Vector3d::Zero(), cm = Eigen::Vector3d::Zero();
+  double total = 0.0;
+  for (std::size_t i = 0; i < data.size(); ++i) {
+    cp += w[i] * data[i];
+    cm += w[i] * model[i];
+    total += w[i];
+  }
+  cp /= total;
+  cm /= total;
+  Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
+  for (std::size_t i = 0; i < data.size(); ++i) h += w[i] * (data[i] - cp) * (model[i] - cm).transpose();
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(h, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+  d(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  const Eigen::Matrix3d r = svd.matrixV() * d * svd.matrixU().transpose();
+  return make_pose(r, cm - r * cp);
 }
 
 /// Independent least-squares rigid fit (Kabsch/Umeyama via SVD, in double, from the raw points).
@@ -299,6 +322,52 @@ TEST(HornTransform, NoisyPairsGiveTheLeastSquaresOptimum) {
   EXPECT_LT(worst_translation, 1e-7);
 }
 
+TEST(HornTransform, WeightedPairsGiveTheWeightedLeastSquaresOptimum) {
+  // The robust kernel's sums (weights in (0, 1]): Horn's closed form on the weighted centroids and
+  // cross-covariance is the weighted Kabsch fit; pairs that weigh next to nothing barely move it.
+  std::mt19937 rng(29);
+  std::uniform_real_distribution<double> u(-400.0, 400.0), t(-50.0, 50.0), weight(0.01, 1.0);
+  std::normal_distribution<double> noise(0.0, 3.0);
+  for (int trial = 0; trial < 50; ++trial) {
+    const Pose truth = make_pose(random_rotation(rng), {t(rng), t(rng), t(rng)});
+    std::vector<Eigen::Vector3d> p, m;
+    std::vector<double> w;
+    PairSums sums;
+    sums.reference_cm = kFarReference;
+    for (int i = 0; i < 10 + trial * 5; ++i) {
+      p.push_back(kFarReference + Eigen::Vector3d(u(rng), u(rng), u(rng)));
+      const bool outlier = i % 5 == 0;  // a wrong pair, 2 m off, that the kernel all but drops
+      m.push_back(apply(truth, p.back()) + Eigen::Vector3d(noise(rng), noise(rng), noise(rng)) +
+                  (outlier ? Eigen::Vector3d(200.0, -100.0, 50.0) : Eigen::Vector3d::Zero()));
+      w.push_back(outlier ? 1e-6 : weight(rng));
+      const Eigen::Vector3d pc = p.back() - kFarReference, mc = m.back() - kFarReference;
+      sums.count += 1.0;
+      sums.weight += w.back();
+      sums.sum_data += w.back() * pc;
+      sums.sum_model += w.back() * mc;
+      sums.sum_data_model += w.back() * pc * mc.transpose();
+    }
+    const auto estimate = horn_transform(sums);
+    ASSERT_TRUE(estimate.has_value());
+    const Pose optimum = weighted_kabsch(p, m, w);
+    EXPECT_LT((estimate->block<3, 3>(0, 0) - optimum.block<3, 3>(0, 0)).cwiseAbs().maxCoeff(), 1e-9) << trial;
+    EXPECT_LT(translation_difference_cm(*estimate, optimum), 1e-6) << trial;
+    // The outliers weigh 1e-6: the fit is the inliers' own, to a thousandth of a cm at every point.
+    std::vector<Eigen::Vector3d> pi, mi;
+    std::vector<double> wi;
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      if (i % 5 == 0) continue;
+      pi.push_back(p[i]);
+      mi.push_back(m[i]);
+      wi.push_back(w[i]);
+    }
+    const Pose inliers_fit = weighted_kabsch(pi, mi, wi);
+    double worst = 0.0;
+    for (const auto& x : p) worst = std::max(worst, (apply(*estimate, x) - apply(inliers_fit, x)).norm());
+    EXPECT_LT(worst, 1e-3) << trial;
+  }
+}
+
 TEST(HornTransform, DegenerateButValidGeometry) {
   std::mt19937 rng(24);
   std::uniform_real_distribution<double> u(-300.0, 300.0);
@@ -364,9 +433,11 @@ TEST(HornTransform, RejectsTooFewPairsAndNonFiniteSums) {
   EXPECT_FALSE(broken([&](PairSums& s) { s.sum_model.z() = nan; }).has_value());
   EXPECT_FALSE(broken([&](PairSums& s) { s.sum_model.y() = -inf; }).has_value());
   EXPECT_FALSE(broken([&](PairSums& s) { s.count = nan; }).has_value());
-  EXPECT_FALSE(broken([&](PairSums& s) { s.count = inf; }).has_value());
+  EXPECT_FALSE(broken([&](PairSums& s) { s.weight = nan; }).has_value());
+  EXPECT_FALSE(broken([&](PairSums& s) { s.weight = inf; }).has_value());
+  EXPECT_FALSE(broken([&](PairSums& s) { s.weight = 0.0; }).has_value());  // every pair weighs nothing
   EXPECT_FALSE(broken([&](PairSums& s) { s.reference_cm.y() = nan; }).has_value());
-  EXPECT_FALSE(broken([&](PairSums& s) { s.count = 2.5; }).has_value());  // weights: fewer than 3
+  EXPECT_FALSE(broken([&](PairSums& s) { s.count = 2.0; }).has_value());  // fewer than 3 pairs
 }
 
 // =============================================================================================

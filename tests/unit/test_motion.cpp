@@ -445,6 +445,57 @@ TEST(MovingMapping, KeyframesWithoutOdometryMatchAThinnedLocalMapAndStopAndGoKee
   for (std::size_t k = 0; k < paper.scans.size(); ++k) EXPECT_EQ(paper.scans[k].pose_cm, other.scans[k].pose_cm) << k;
 }
 
+// The robust kernel of the wide matches' coarse stage (MotionSettings::wide_coarse_kernel_fraction)
+// weighs the pairs of scans that constant velocity places: keyframes without odometry are matched
+// with it (and land as well as without it; off by default), a stop-and-go survey with odometry
+// keeps the paper's sums, its poses not depending on the setting at all. The figures on real
+// keyframes are in docs/benchmarks.md ("A robust kernel in the coarse stage").
+TEST(MovingMapping, KeyframesWeighTheirWideCoarseStageAndStopAndGoKeepsThePapersSums) {
+  sim::MovingSimulationSettings simulation;
+  simulation.sensor = sim::MovingSensor::kHandheld;
+  simulation.sweeps = 30;
+  simulation.mine.seed = 3;
+  sim::MovingSurvey keyframes = sim::simulate_moving_survey(simulation);
+  for (Scan& scan : keyframes.scans) scan.attributes.time_s.clear();
+  MappingSettings unweighted, kernel;
+  EXPECT_EQ(unweighted.motion.wide_coarse_kernel_fraction, 0.0);  // off by default
+  kernel.motion.wide_coarse_kernel_fraction = 0.6;
+  const MovingRun weighted = map_moving(keyframes, kernel);
+  const MovingRun plain = map_moving(keyframes, unweighted);
+  std::printf("keyframes: coarse kernel %.2f cm mean (%.2f a step), unweighted %.2f cm (%.2f)\n",
+              weighted.errors.mean_translation_cm, weighted.errors.mean_relative_translation_cm,
+              plain.errors.mean_translation_cm, plain.errors.mean_relative_translation_cm);
+  EXPECT_NE(weighted.errors.mean_translation_cm, plain.errors.mean_translation_cm);  // the kernel is used
+  EXPECT_LT(weighted.errors.mean_translation_cm, 1.5 * plain.errors.mean_translation_cm);
+  EXPECT_LT(weighted.errors.mean_relative_translation_cm, 1.25 * plain.errors.mean_relative_translation_cm);
+  EXPECT_EQ(weighted.doubtful, 0u);
+
+  sim::SimulationSettings stop_and_go;
+  stop_and_go.mine.scans = 4;
+  stop_and_go.mine.seed = 7;
+  const sim::SimulatedSurvey survey = sim::simulate_mine_survey(stop_and_go);
+  CpuBackend cpu;
+  MappingSettings strong;
+  strong.motion.wide_coarse_kernel_fraction = 0.1;
+  const MappingResult paper = map_survey(survey.scans, unweighted, cpu);
+  const MappingResult other = map_survey(survey.scans, strong, cpu);
+  ASSERT_EQ(paper.scans.size(), 4u);
+  for (std::size_t k = 0; k < paper.scans.size(); ++k) EXPECT_EQ(paper.scans[k].pose_cm, other.scans[k].pose_cm) << k;
+}
+
+TEST(MovingMapping, TheCoarseKernelMustBeAFiniteFractionOrZero) {
+  MappingSettings settings;
+  for (const double bad : {-0.5, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    settings.motion.wide_coarse_kernel_fraction = bad;
+    EXPECT_THROW(settings.validate(), std::invalid_argument) << bad;
+  }
+  settings.motion.wide_coarse_kernel_fraction = 0.0;  // off
+  EXPECT_NO_THROW(settings.validate());
+  IcpSettings icp;
+  icp.robust_scale_fraction = -1.0f;
+  EXPECT_THROW(icp.validate(), std::invalid_argument);
+}
+
 // The slide test's second start: the match's move from the prediction along the weak direction is
 // taken out, and nothing else of it (against the correction worked out by hand in the predicted
 // frame, for random poses and directions).

@@ -4,7 +4,9 @@
 
 #include <bit>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
+#include <string>
 #include <thread>
 
 #include "minemap/backend/compute_backend.hpp"
@@ -254,6 +256,52 @@ TEST_P(SearchTest, SumsMatchDoubleReferenceFarFromOrigin) {
   EXPECT_NEAR(sums.sum_squared_distance_cm2 / reference.sum_squared_distance_cm2, 1.0, 1e-5);
 }
 
+TEST_P(SearchTest, RobustSumsWeighEachPairByTheGemanMcClureKernel) {
+  // PairingSettings::robust_scale_cm: every pair's terms times w = (s^2 / (s^2 + d^2))^2, written
+  // here from its definition (not shared::mm_robust_weight), over the brute force's pairs; the count
+  // and the squared distances stay unweighted. A scale of 0 is the plain sums, bit for bit.
+  const auto model_points = random_cloud(6000, -300.f, 300.f, 21);
+  auto data_points = random_cloud(3000, -300.f, 300.f, 22);
+  auto model = backend_->prepare(model_points, {});
+  auto data = backend_->prepare(data_points, {});
+  const ModelPlacement placement{model.get(), Pose::Identity()};
+  const float bound = 30.f, scale = 10.f;
+  const auto pairs = make_cpu_backend()->nearest(*data, {&placement, 1}, SearchMethod::kBruteForce, {bound});
+  for (auto method : {SearchMethod::kExact, SearchMethod::kBruteForce}) {
+    const PairSums sums = backend_->pair_and_sum(*data, {&placement, 1}, method, {bound, scale});
+    PairSums expected;
+    double magnitude = 0.0;
+    for (std::size_t i = 0; i < data_points.size(); ++i) {
+      if (pairs[i].squared_distance_cm2 < 0) continue;
+      const Eigen::Vector3d p = data_points[i].cast<double>() - sums.reference_cm;
+      const Eigen::Vector3d m = pairs[i].position_cm.cast<double>() - sums.reference_cm;
+      const double d2 = pairs[i].squared_distance_cm2, s2 = double(scale) * scale;
+      const double w = (s2 / (s2 + d2)) * (s2 / (s2 + d2));
+      expected.count += 1.0;
+      expected.weight += w;
+      expected.sum_data += w * p;
+      expected.sum_model += w * m;
+      expected.sum_data_model += w * p * m.transpose();
+      expected.sum_squared_distance_cm2 += d2;
+      magnitude += p.norm();
+    }
+    ASSERT_GT(expected.count, 1000);
+    EXPECT_EQ(sums.count, expected.count) << to_string(method);
+    EXPECT_LT(expected.weight, 0.9 * expected.count);  // the kernel weighs far pairs down
+    EXPECT_NEAR(sums.weight / expected.weight, 1.0, 1e-6) << to_string(method);
+    EXPECT_NEAR(sums.sum_squared_distance_cm2 / expected.sum_squared_distance_cm2, 1.0, 1e-6);
+    EXPECT_LT((sums.sum_data - expected.sum_data).norm() / magnitude, 1e-6) << to_string(method);
+    EXPECT_LT((sums.sum_model - expected.sum_model).norm() / magnitude, 1e-6) << to_string(method);
+    EXPECT_LT((sums.sum_data_model - expected.sum_data_model).norm() / expected.sum_data_model.norm(), 1e-6);
+    // Scale 0: every pair weighs exactly 1.
+    const PairSums plain = backend_->pair_and_sum(*data, {&placement, 1}, method, {bound});
+    const PairSums zero = backend_->pair_and_sum(*data, {&placement, 1}, method, {bound, 0.f});
+    EXPECT_EQ(plain.weight, plain.count);
+    EXPECT_EQ(zero.sum_data_model, plain.sum_data_model);
+    EXPECT_EQ(zero.sum_data, plain.sum_data);
+  }
+}
+
 TEST_P(SearchTest, SumsAreBitIdenticalRunToRun) {
   const auto cloud = random_cloud(30000, 0.f, 2000.f, 10);
   auto model = backend_->prepare(cloud, {});
@@ -324,6 +372,28 @@ TEST(SearchBackends, CpuAndOpenClFindTheSameDistances) {
     }
     // Contraction is off in the kernels and the C++ build: the distances agree bit for bit.
     EXPECT_EQ(mismatches, 0) << to_string(method);
+  }
+  // The robust sums (PairingSettings::robust_scale_cm) are the same bits on both backends where
+  // the device sums in double (the opencl_float_sums run, MINEMAP_OPENCL_FP64=off, sums in float).
+  {
+    const char* fp64 = std::getenv("MINEMAP_OPENCL_FP64");
+    const bool float_sums = fp64 != nullptr && std::string(fp64) == "off";
+    const ModelPlacement cp{cm.get(), placement_pose};
+    const ModelPlacement gp{gm.get(), placement_pose};
+    const PairSums a = cpu->pair_and_sum(*cd, {&cp, 1}, SearchMethod::kExact, {40.f, 13.f});
+    const PairSums b = device->pair_and_sum(*gd, {&gp, 1}, SearchMethod::kExact, {40.f, 13.f});
+    EXPECT_GT(a.count, 100.0);
+    EXPECT_LT(a.weight, a.count);
+    EXPECT_EQ(a.count, b.count);
+    if (float_sums) {
+      EXPECT_NEAR(b.weight / a.weight, 1.0, 1e-5);
+      EXPECT_LT((a.sum_data_model - b.sum_data_model).norm() / a.sum_data_model.norm(), 1e-5);
+    } else {
+      EXPECT_EQ(a.weight, b.weight);
+      EXPECT_EQ(a.sum_data, b.sum_data);
+      EXPECT_EQ(a.sum_model, b.sum_model);
+      EXPECT_EQ(a.sum_data_model, b.sum_data_model);
+    }
   }
   // ... and with a run of the model's points left out (SkippedPoints), the same points found.
   const ModelPlacement cp{cm.get(), placement_pose, {5000, 7000}};

@@ -125,7 +125,8 @@ class OpenClBackend final : public ComputeBackend {
     try {
       if (n == 0 || !search(cloud, n, models, method, settings)) return total;
       // Only the per-group (or per-block) partial sums cross the bus.
-      if (runtime_->has_fp64()) return sums_by_block(cloud, n, data.centroid_cm());
+      const float scale_squared = settings.robust_scale_cm * settings.robust_scale_cm;
+      if (runtime_->has_fp64()) return sums_by_block(cloud, n, data.centroid_cm(), scale_squared);
       // The centroid is float-representable (PreparedCloud rounds it), so the device subtracts
       // exactly the reference the host adds back in t = (c_m + r) - R (c_p + r).
       const Eigen::Vector3f r = data.centroid_cm().cast<float>();
@@ -135,6 +136,7 @@ class OpenClBackend final : public ComputeBackend {
       pair_sums_.setArg(arg++, best_pair_);
       pair_sums_.setArg(arg++, n);
       pair_sums_.setArg(arg++, reference);
+      pair_sums_.setArg(arg++, scale_squared);
       pair_sums_.setArg(arg++, partials_);
       pair_sums_.setArg(arg++, cl::Local(kSumTerms * reduction_group_size_ * sizeof(float)));
       runtime_->launch(pair_sums_, kReductionGroups * reduction_group_size_, reduction_group_size_);
@@ -152,8 +154,9 @@ class OpenClBackend final : public ComputeBackend {
   }
 
   /// The sums as the CPU makes them (kernel pair_sums_blocks): bit-identical to the CPU backend.
-  /// Reads back 17 doubles per block of kPairSumBlock data points (about 2 % of the pairs' bytes).
-  PairSums sums_by_block(const OpenClPreparedCloud& cloud, cl_int n, const Eigen::Vector3d& reference) {
+  /// Reads back kSumTerms doubles per block of kPairSumBlock data points (about 2 % of the pairs' bytes).
+  PairSums sums_by_block(const OpenClPreparedCloud& cloud, cl_int n, const Eigen::Vector3d& reference,
+                         float scale_squared) {
     const std::size_t blocks = (static_cast<std::size_t>(n) + kPairSumBlock - 1) / kPairSumBlock;
     if (block_partials_count_ < blocks) {
       block_partials_ = runtime_->buffer(CL_MEM_WRITE_ONLY, blocks * kSumTerms * sizeof(double));
@@ -166,6 +169,7 @@ class OpenClBackend final : public ComputeBackend {
     pair_sums_blocks_.setArg(arg++, reference.x());
     pair_sums_blocks_.setArg(arg++, reference.y());
     pair_sums_blocks_.setArg(arg++, reference.z());
+    pair_sums_blocks_.setArg(arg++, scale_squared);
     pair_sums_blocks_.setArg(arg++, block_partials_);
     const std::size_t group = std::min<std::size_t>(64, runtime_->work_group_size(pair_sums_blocks_, 64));
     runtime_->launch(pair_sums_blocks_, (blocks + group - 1) / group * group, group);

@@ -107,6 +107,7 @@ PairSums CpuBackend::pair_and_sum(const PreparedCloud& data, std::span<const Mod
   const auto points = data.points();
   const Eigen::Vector3d reference = data.centroid_cm();
   const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
+  const float scale_squared = settings.robust_scale_cm * settings.robust_scale_cm;
   const std::size_t blocks = (points.size() + kQueriesPerBlock - 1) / kQueriesPerBlock;
   std::vector<PairSums> partial(blocks);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const tbb::blocked_range<std::size_t>& range) {
@@ -124,7 +125,8 @@ PairSums CpuBackend::pair_and_sum(const PreparedCloud& data, std::span<const Mod
                               static_cast<double>(p.z()) - reference.z()};
         const double mc[3] = {static_cast<double>(m.x()) - reference.x(), static_cast<double>(m.y()) - reference.y(),
                               static_cast<double>(m.z()) - reference.z()};
-        shared::mm_add_point_to_point_terms(terms.data(), pc, mc, pair.squared_distance_cm2);
+        shared::mm_add_point_to_point_terms(terms.data(), pc, mc, pair.squared_distance_cm2,
+                                            shared::mm_robust_weight(pair.squared_distance_cm2, scale_squared));
       }
       partial[b] = PairSums::from_terms(terms.data(), reference);
     }

@@ -98,6 +98,7 @@ std::optional<Pose> fit(const FeatureCloud& data, const FeatureCloud& model, con
     const Eigen::Vector3d p = data.points_cm[pairs[k].first].cast<double>();
     const Eigen::Vector3d m = model.points_cm[pairs[k].second].cast<double>();
     sums.count += 1.0;
+    sums.weight += 1.0;
     sums.sum_data += p;
     sums.sum_model += m;
     sums.sum_data_model += p * m.transpose();

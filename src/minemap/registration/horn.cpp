@@ -18,8 +18,10 @@ Eigen::Matrix4d horn_matrix(const Eigen::Matrix3d& s) {
 }
 
 std::optional<Pose> horn_transform(const PairSums& sums) {
-  if (sums.count < 3.0) return std::nullopt;
-  const double n = sums.count;
+  // The weighted centroids and cross-covariance (weighted Horn: the same closed form); the weights
+  // sum to the pair count when unweighted.
+  if (!(sums.count >= 3.0) || !(sums.weight > 0.0)) return std::nullopt;
+  const double n = sums.weight;
   const Eigen::Vector3d centroid_data = sums.sum_data / n;
   const Eigen::Vector3d centroid_model = sums.sum_model / n;
   const Eigen::Matrix3d cross = sums.sum_data_model - n * centroid_data * centroid_model.transpose();

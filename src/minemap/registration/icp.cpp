@@ -36,6 +36,9 @@ void IcpSettings::validate() const {
   }
   if (termination.min_pairs < 0) throw std::invalid_argument("ICP's minimum pair count must be >= 0");
   if (acceleration_history < 1) throw std::invalid_argument("the acceleration history must be >= 1");
+  if (!(robust_scale_fraction >= 0.0f) || !std::isfinite(robust_scale_fraction)) {
+    throw std::invalid_argument("the robust kernel's scale must be a finite fraction >= 0 of the pair bound (0 = off)");
+  }
 }
 
 namespace {
@@ -141,7 +144,8 @@ class IcpRun {
   PairSums pair(SearchMethod method, float bound_cm) {
     placed_.clear();
     for (const auto& m : models_) placed_.push_back({m.cloud, rigid_inverse(m.world_from_model) * pose_, m.skip});
-    return backend_.pair_and_sum(data_, placed_, method, PairingSettings{bound_cm});
+    return backend_.pair_and_sum(data_, placed_, method,
+                                 PairingSettings{bound_cm, bound_cm * settings_.robust_scale_fraction});
   }
 
   /// ICP's objective with the pair bound: every data point costs its squared pair distance, or the

@@ -48,6 +48,10 @@ struct IcpSettings {
   /// Off: plain ICP, as in the paper.
   bool accelerate = false;
   int acceleration_history = 5;  ///< steps the extrapolation uses (AA-ICP's m)
+  /// Each pair weighed by the Geman-McClure kernel (PairingSettings::robust_scale_cm) at this
+  /// fraction of the pair bound, Horn's method then taking the weighted sums (KISS-ICP: a third).
+  /// 0: every pair weighs 1, the paper's ICP.
+  float robust_scale_fraction = 0.0f;
 
   /// The paper's ICP: approximate then exact search, 25 cm, plain steps.
   static IcpSettings paper() { return {}; }

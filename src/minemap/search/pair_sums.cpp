@@ -12,6 +12,7 @@ PairSums& PairSums::operator+=(const PairSums& other) {
   sum_model += other.sum_model;
   sum_data_model += other.sum_data_model;
   sum_squared_distance_cm2 += other.sum_squared_distance_cm2;
+  weight += other.weight;
   return *this;
 }
 

@@ -21,13 +21,15 @@ inline constexpr int kSumTerms = MM_SUM_TERMS;
 inline constexpr int kPairSumBlock = MM_PAIR_SUM_BLOCK;
 
 /// The point-to-point sums over a set of pairs (p in the data cloud, m its closest model point,
-/// both in the data frame), centred on `reference_cm`: p' = p - r, m' = m - r. Held in double.
+/// both in the data frame), centred on `reference_cm`: p' = p - r, m' = m - r, each pair weighted
+/// by w (1, or a robust kernel's weight: PairingSettings::robust_scale_cm). Held in double.
 struct PairSums {
-  double count = 0.0;
-  Eigen::Vector3d sum_data = Eigen::Vector3d::Zero();         ///< sum of p'
-  Eigen::Vector3d sum_model = Eigen::Vector3d::Zero();        ///< sum of m'
-  Eigen::Matrix3d sum_data_model = Eigen::Matrix3d::Zero();   ///< sum of p' m'^T
-  double sum_squared_distance_cm2 = 0.0;                      ///< sum of |p - m|^2
+  double count = 0.0;                                         ///< pairs
+  Eigen::Vector3d sum_data = Eigen::Vector3d::Zero();         ///< sum of w p'
+  Eigen::Vector3d sum_model = Eigen::Vector3d::Zero();        ///< sum of w m'
+  Eigen::Matrix3d sum_data_model = Eigen::Matrix3d::Zero();   ///< sum of w p' m'^T
+  double sum_squared_distance_cm2 = 0.0;                      ///< sum of |p - m|^2 (unweighted)
+  double weight = 0.0;                                        ///< sum of w (= count when unweighted)
   Eigen::Vector3d reference_cm = Eigen::Vector3d::Zero();
 
   double rms_cm() const;
@@ -46,6 +48,7 @@ struct PairSums {
       for (int c = 0; c < 3; ++c) sums.sum_data_model(r, c) = terms[MM_TERM_SUM_DATA_MODEL + 3 * r + c];
     }
     sums.sum_squared_distance_cm2 = terms[MM_TERM_SUM_SQUARED_DISTANCE];
+    sums.weight = terms[MM_TERM_WEIGHT];
     return sums;
   }
 };

@@ -39,6 +39,9 @@ struct PairingSettings {
   /// Pairs farther apart are dropped: 3DTK's default, 25 cm, and the one definition of the pair
   /// bound's default (IcpSettings::max_pair_dist_cm starts from it).
   float max_pair_dist_cm = 25.0f;
+  /// The scale of the Geman-McClure kernel that weighs each pair in the sums (shared::
+  /// mm_robust_weight: 1/4 at this distance); 0: every pair weighs 1, the paper's sums.
+  float robust_scale_cm = 0.0f;
 };
 
 /// The closest model point of one query, for tests and overlap counting.

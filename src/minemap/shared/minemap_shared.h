@@ -27,14 +27,16 @@ namespace minemap::shared {
 #define MM_MAX_MEDIAN_WINDOW 31
 
 // ---- the point-to-point objective's sums (search/pair_sums.hpp) ---------------------------------
-// Per pair (p in the data cloud, m its closest model point, both centred on the data centroid):
-//   count, sum p' (3), sum m' (3), sum p' m'^T (9, row-major), sum |p - m|^2.
+// Per pair (p in the data cloud, m its closest model point, both centred on the data centroid, w
+// the pair's weight: 1, or the robust kernel's): count, sum w p' (3), sum w m' (3), sum w p' m'^T
+// (9, row-major), sum |p - m|^2, sum w.
 #define MM_TERM_COUNT 0
 #define MM_TERM_SUM_DATA 1
 #define MM_TERM_SUM_MODEL 4
 #define MM_TERM_SUM_DATA_MODEL 7
 #define MM_TERM_SUM_SQUARED_DISTANCE 16
-#define MM_SUM_TERMS 17
+#define MM_TERM_WEIGHT 17
+#define MM_SUM_TERMS 18
 
 // ---- scalar steps both sides take in the same order --------------------------------------------------
 /// |a - b|^2 as ((dx dx + dy dy) + dz dz).
@@ -65,18 +67,31 @@ inline void mm_insert_sorted(float* keys, int* ids, int n, float key, int id) {
 #ifdef __OPENCL_C_VERSION__
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #endif
+/// A pair's weight under the Geman-McClure kernel of scale s (squared: `scale_squared`, cm^2) at
+/// squared distance d^2: (s^2 / (s^2 + d^2))^2, 1 at d = 0, 1/4 at d = s; the IRLS weight of
+/// rho(d) = d^2 s^2 / (s^2 + d^2) (KISS-ICP's kernel). A scale of 0 weighs every pair 1, exactly.
+inline double mm_robust_weight(float squared_distance, float scale_squared) {
+  if (!(scale_squared > 0.0f)) return 1.0;
+  const double ratio = (double)scale_squared / ((double)scale_squared + (double)squared_distance);
+  return ratio * ratio;
+}
+
 /// Adds one pair's point-to-point terms to `acc` (MM_SUM_TERMS doubles): pc = p - reference and
-/// mc = m - reference, already in double. The order of these additions is the bit-identity contract.
-inline void mm_add_point_to_point_terms(double* acc, const double* pc, const double* mc, float squared_distance) {
+/// mc = m - reference, already in double, `weight` from mm_robust_weight (w = 1 leaves every
+/// product exact, so unweighted sums are the unweighted sums' bits). The order of these additions
+/// is the bit-identity contract.
+inline void mm_add_point_to_point_terms(double* acc, const double* pc, const double* mc, float squared_distance,
+                                        double weight) {
   acc[MM_TERM_COUNT] += 1.0;
   for (int r = 0; r < 3; ++r) {
-    acc[MM_TERM_SUM_DATA + r] += pc[r];
-    acc[MM_TERM_SUM_MODEL + r] += mc[r];
+    acc[MM_TERM_SUM_DATA + r] += weight * pc[r];
+    acc[MM_TERM_SUM_MODEL + r] += weight * mc[r];
   }
   for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) acc[MM_TERM_SUM_DATA_MODEL + 3 * r + c] += pc[r] * mc[c];
+    for (int c = 0; c < 3; ++c) acc[MM_TERM_SUM_DATA_MODEL + 3 * r + c] += weight * pc[r] * mc[c];
   }
   acc[MM_TERM_SUM_SQUARED_DISTANCE] += (double)squared_distance;
+  acc[MM_TERM_WEIGHT] += weight;
 }
 
 /// A point moved by a rigid transform in double, as a metascan's union moves each scan's model

@@ -164,7 +164,8 @@ void tie_to_control(MappingResult& result, const io::ControlFile& control, bool 
       if (!use[ob.point]) continue;
       const double w = (3.0 / ob.covariance.trace()) * static_cast<double>(count) / total_weight;
       const Eigen::Vector3d p = placed(poses[ob.scan], ob.in_points_cm);
-      sums.count += w;
+      sums.count += 1.0;
+      sums.weight += w;
       sums.sum_data += w * p;
       sums.sum_model += w * ob.known_cm;
       sums.sum_data_model += w * p * ob.known_cm.transpose();

@@ -138,6 +138,9 @@ void MotionSettings::validate() const {
   }
   if (adaptive_bound_window < 1) throw std::invalid_argument("the adaptive bound's window must be >= 1 scan");
   if (!(max_sweep_s > 0.0)) throw std::invalid_argument("the longest sweep must be > 0 s");
+  if (!(wide_coarse_kernel_fraction >= 0.0) || !std::isfinite(wide_coarse_kernel_fraction)) {
+    throw std::invalid_argument("the coarse stage's kernel must be a finite fraction >= 0 of the bound (0 = off)");
+  }
   if (!(local_map_cell_cm >= 0.0) || !std::isfinite(local_map_cell_cm)) {
     throw std::invalid_argument("the local map's cell must be a finite length >= 0 cm");
   }

@@ -19,6 +19,10 @@ double MotionPrediction::local_map_cell_cm(const SurveyState& state, std::size_t
   return moving ? settings_.motion.local_map_cell_cm : 0.0;
 }
 
+float MotionPrediction::wide_coarse_kernel_fraction(const SurveyState& state, std::size_t i) const {
+  return constant_velocity_at(state, i) ? static_cast<float>(settings_.motion.wide_coarse_kernel_fraction) : 0.0f;
+}
+
 Pose MotionPrediction::file_pose(const SurveyState& state, std::size_t i, const Pose& world_from_points) {
   return world_from_points * state.points_from_file(i);
 }

@@ -54,6 +54,9 @@ class MotionPrediction {
   /// as the paper) for a stop-and-go survey's. (A keyframe's recovery describes its features on
   /// every point: thinned, its FPFH start was worse on 3 of the 4 real sequences.)
   double local_map_cell_cm(const SurveyState& state, std::size_t i) const;
+  /// The robust kernel of scan i's wide matches' coarse stage: MotionSettings::
+  /// wide_coarse_kernel_fraction where constant velocity places it, 0 (the paper's sums) elsewhere.
+  float wide_coarse_kernel_fraction(const SurveyState& state, std::size_t i) const;
   /// The sensor's motion over scan j's sweep (start to end, its own file frame, cm) if it stood at
   /// T_world_points `pose_j` and scan `other` (j-1 or j+1) where the state holds it: the step
   /// between them at constant velocity, scaled by the sweep's duration over the time between their

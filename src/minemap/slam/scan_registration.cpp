@@ -27,11 +27,13 @@ IcpSettings ScanRegistration::icp_for(const PreparedScan& scan, Convergence conv
 
 WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, const Pose& start,
                                                   std::span<const WorldModel> models, float bound_cm,
-                                                  Convergence convergence, bool coarse_on_probe) const {
+                                                  Convergence convergence, bool coarse_on_probe,
+                                                  float coarse_kernel_fraction) const {
   const IcpSettings icp = icp_for(scan, convergence);
   IcpSettings wide = icp;
   wide.max_pair_dist_cm = bound_cm;
   wide.refine_pair_dist_fraction = 0.0f;
+  wide.robust_scale_fraction = coarse_kernel_fraction;
   WideMatch match;
   const PreparedCloud& coarse_data = coarse_on_probe ? *scan.probe : data_of(scan, convergence);
   if (coarse_on_probe) wide.termination.min_pairs = settings_.min_pairs_for(coarse_data.points().size());
@@ -57,14 +59,15 @@ WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, cons
 
 ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& start,
                                           const ModelsForBound& models_for, float start_bound_cm,
-                                          Convergence convergence) const {
+                                          Convergence convergence, float coarse_kernel_fraction) const {
   ScanMatch match;
   float widest_cm = icp_.max_pair_dist_cm;
   if (start_bound_cm > widest_cm) {
     // The motion model's adaptive bound: the first match is a wide one, coarse to fine.
     const std::vector<WorldModel> models = models_for(start_bound_cm, start);
     WideMatch wide =
-        match_from_wide_bound(scan, start, models, start_bound_cm, convergence, settings_.motion.wide_coarse_probe);
+        match_from_wide_bound(scan, start, models, start_bound_cm, convergence, settings_.motion.wide_coarse_probe,
+                              coarse_kernel_fraction);
     match.iterations = wide.iterations;
     if (!wide.fine) {
       match.first = wide.failed;
@@ -90,7 +93,8 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
     if (bound <= widest_cm) continue;
     widest_cm = bound;
     const std::vector<WorldModel> wide_models = models_for(bound, match.first.world_from_data);
-    WideMatch retry = match_from_wide_bound(scan, start, wide_models, bound, convergence);
+    WideMatch retry =
+        match_from_wide_bound(scan, start, wide_models, bound, convergence, false, coarse_kernel_fraction);
     match.iterations += retry.iterations;
     if (!retry.fine) continue;
     if (retry.health.doubtful()) {

@@ -64,15 +64,19 @@ class ScanRegistration {
   /// Registers `scan` from `start` and judges the match; a doubtful one is tried again from the
   /// same start at each wider bound, until one is trusted. `start_bound_cm` wider than the pair
   /// bound (the motion model's adaptive bound): the first match already starts there, coarse to fine.
+  /// `coarse_kernel_fraction`: the robust kernel of every wide match's coarse stage (a moving
+  /// sensor's: MotionSettings::wide_coarse_kernel_fraction; 0: the paper's sums).
   ScanMatch register_scan(const PreparedScan& scan, const Pose& start, const ModelsForBound& models_for,
-                          float start_bound_cm = 0.0f, Convergence convergence = Convergence::kFinal) const;
+                          float start_bound_cm = 0.0f, Convergence convergence = Convergence::kFinal,
+                          float coarse_kernel_fraction = 0.0f) const;
 
   /// ICP at `bound_cm` from `start` (no refinement), then the usual phases from where that ended,
   /// judged with the reach of the wide bound. `coarse_on_probe`: the first ICP on the health probe's
-  /// points (MotionSettings::wide_coarse_probe).
+  /// points (MotionSettings::wide_coarse_probe); `coarse_kernel_fraction`: that ICP's robust kernel
+  /// (IcpSettings::robust_scale_fraction).
   WideMatch match_from_wide_bound(const PreparedScan& scan, const Pose& start, std::span<const WorldModel> models,
                                   float bound_cm, Convergence convergence = Convergence::kFinal,
-                                  bool coarse_on_probe = false) const;
+                                  bool coarse_on_probe = false, float coarse_kernel_fraction = 0.0f) const;
 
   /// The health of `scan` at `pose`, moved there from `start`, against `models`, at the pair bound
   /// (the reach test at `reach_bound_cm` when > 0).

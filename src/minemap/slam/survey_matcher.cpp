@@ -156,7 +156,7 @@ ScanMatch SurveyMatcher::match_pairwise(std::size_t i, const Pose& start, float 
   const std::size_t previous[] = {i - 1};
   return registration_.register_scan(
       state_.prepared(i), start, [&](float, const Pose&) { return state_.models_of(previous); }, start_bound_cm,
-      convergence);
+      convergence, motion_.wide_coarse_kernel_fraction(state_, i));
 }
 
 ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, float start_bound_cm,
@@ -182,7 +182,7 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, flo
         local_map_.metascan(state_, i, standing, frame, start, grow_cm, thin_cm));
     if (thin_cm > 0.0 && standing == start) last = {i, bound_cm, frame, start, metascans.back()};
     return std::vector<WorldModel>{{metascans.back().get(), frame}};
-  }, start_bound_cm, convergence);
+  }, start_bound_cm, convergence, motion_.wide_coarse_kernel_fraction(state_, i));
 }
 
 ScanMatch SurveyMatcher::match_from(std::size_t i, const Prediction& prediction, Convergence convergence) const {
