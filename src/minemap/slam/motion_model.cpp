@@ -19,10 +19,6 @@ double MotionPrediction::local_map_cell_cm(const SurveyState& state, std::size_t
   return moving ? settings_.motion.local_map_cell_cm : 0.0;
 }
 
-float MotionPrediction::wide_coarse_kernel_fraction(const SurveyState& state, std::size_t i) const {
-  return constant_velocity_at(state, i) ? static_cast<float>(settings_.motion.wide_coarse_kernel_fraction) : 0.0f;
-}
-
 Pose MotionPrediction::file_pose(const SurveyState& state, std::size_t i, const Pose& world_from_points) {
   return world_from_points * state.points_from_file(i);
 }
@@ -52,6 +48,12 @@ Prediction MotionPrediction::predict(const SurveyState& state, std::size_t i) co
   }
   prediction.start = previous * step * rigid_inverse(state.points_from_file(i));
   prediction.start_bound_cm = std::max(prediction.start_bound_cm, adaptive_bound_cm(state, i));
+  // Keyframes without times only: a timed sweep's first match is provisional, its deskew matches
+  // it again, and there the kernel lost the simulated spinning loop's closure (docs/benchmarks.md).
+  if (settings_.motion.wide_coarse_kernel_fraction > 0.0 && !(state.prepared(i).sweep_s > 0.0) &&
+      recent_error(state, i).count > 0) {
+    prediction.coarse_kernel_fraction = static_cast<float>(settings_.motion.wide_coarse_kernel_fraction);
+  }
   return prediction;
 }
 

@@ -32,6 +32,11 @@ struct Prediction {
   Pose start = Pose::Identity();  ///< T_world_points
   bool constant_velocity = false; ///< predicted from the previous steps, not from odometry
   float start_bound_cm = 0.0f;    ///< the pair bound its first match starts at (>= the pair bound)
+  /// The robust kernel of that first match's coarse stage (IcpSettings::robust_scale_fraction):
+  /// MotionSettings::wide_coarse_kernel_fraction for a keyframe without times whose bound was
+  /// learned from trusted matches (a start as near as the recent ones were); 0 (the paper's sums)
+  /// before there are any, and for timed sweeps.
+  float coarse_kernel_fraction = 0.0f;
 };
 
 class MotionPrediction {
@@ -54,9 +59,6 @@ class MotionPrediction {
   /// as the paper) for a stop-and-go survey's. (A keyframe's recovery describes its features on
   /// every point: thinned, its FPFH start was worse on 3 of the 4 real sequences.)
   double local_map_cell_cm(const SurveyState& state, std::size_t i) const;
-  /// The robust kernel of scan i's wide matches' coarse stage: MotionSettings::
-  /// wide_coarse_kernel_fraction where constant velocity places it, 0 (the paper's sums) elsewhere.
-  float wide_coarse_kernel_fraction(const SurveyState& state, std::size_t i) const;
   /// The sensor's motion over scan j's sweep (start to end, its own file frame, cm) if it stood at
   /// T_world_points `pose_j` and scan `other` (j-1 or j+1) where the state holds it: the step
   /// between them at constant velocity, scaled by the sweep's duration over the time between their

@@ -93,8 +93,7 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
     if (bound <= widest_cm) continue;
     widest_cm = bound;
     const std::vector<WorldModel> wide_models = models_for(bound, match.first.world_from_data);
-    WideMatch retry =
-        match_from_wide_bound(scan, start, wide_models, bound, convergence, false, coarse_kernel_fraction);
+    WideMatch retry = match_from_wide_bound(scan, start, wide_models, bound, convergence);
     match.iterations += retry.iterations;
     if (!retry.fine) continue;
     if (retry.health.doubtful()) {

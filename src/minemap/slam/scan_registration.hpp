@@ -64,8 +64,9 @@ class ScanRegistration {
   /// Registers `scan` from `start` and judges the match; a doubtful one is tried again from the
   /// same start at each wider bound, until one is trusted. `start_bound_cm` wider than the pair
   /// bound (the motion model's adaptive bound): the first match already starts there, coarse to fine.
-  /// `coarse_kernel_fraction`: the robust kernel of every wide match's coarse stage (a moving
-  /// sensor's: MotionSettings::wide_coarse_kernel_fraction; 0: the paper's sums).
+  /// `coarse_kernel_fraction`: the robust kernel of that first wide match's coarse stage
+  /// (Prediction::coarse_kernel_fraction; 0: the paper's sums). Retries, for starts out of reach,
+  /// keep the paper's sums: the kernel would weigh every far pair down and hold the scan where it is.
   ScanMatch register_scan(const PreparedScan& scan, const Pose& start, const ModelsForBound& models_for,
                           float start_bound_cm = 0.0f, Convergence convergence = Convergence::kFinal,
                           float coarse_kernel_fraction = 0.0f) const;

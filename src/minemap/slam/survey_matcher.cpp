@@ -152,15 +152,15 @@ void SurveyMatcher::restore_counters(const MappingResult& saved) {
 }
 
 ScanMatch SurveyMatcher::match_pairwise(std::size_t i, const Pose& start, float start_bound_cm,
-                                        Convergence convergence) const {
+                                        Convergence convergence, float coarse_kernel_fraction) const {
   const std::size_t previous[] = {i - 1};
   return registration_.register_scan(
       state_.prepared(i), start, [&](float, const Pose&) { return state_.models_of(previous); }, start_bound_cm,
-      convergence, motion_.wide_coarse_kernel_fraction(state_, i));
+      convergence, coarse_kernel_fraction);
 }
 
 ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, float start_bound_cm,
-                                           Convergence convergence) const {
+                                           Convergence convergence, float coarse_kernel_fraction) const {
   // In the frame of scan i-1, so the metascan's float coordinates stay small wherever the survey
   // is; the metascans made for each bound live until the scan is registered.
   const Pose frame = state_.pose(i - 1);
@@ -182,13 +182,15 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, flo
         local_map_.metascan(state_, i, standing, frame, start, grow_cm, thin_cm));
     if (thin_cm > 0.0 && standing == start) last = {i, bound_cm, frame, start, metascans.back()};
     return std::vector<WorldModel>{{metascans.back().get(), frame}};
-  }, start_bound_cm, convergence, motion_.wide_coarse_kernel_fraction(state_, i));
+  }, start_bound_cm, convergence, coarse_kernel_fraction);
 }
 
 ScanMatch SurveyMatcher::match_from(std::size_t i, const Prediction& prediction, Convergence convergence) const {
   return settings_.mode == MatchingMode::kIncremental
-             ? match_incremental(i, prediction.start, prediction.start_bound_cm, convergence)
-             : match_pairwise(i, prediction.start, prediction.start_bound_cm, convergence);
+             ? match_incremental(i, prediction.start, prediction.start_bound_cm, convergence,
+                                 prediction.coarse_kernel_fraction)
+             : match_pairwise(i, prediction.start, prediction.start_bound_cm, convergence,
+                              prediction.coarse_kernel_fraction);
 }
 
 void SurveyMatcher::place(std::size_t i, const ScanMatch& match, const Pose& start) {
