@@ -173,10 +173,11 @@ __kernel void nearest_brute_force(__global const float4* data, const int data_co
   }
 }
 
-// The ICP sums over all pairs, centred on `reference` (data frame): count, sum p', sum m',
-// sum p' m'^T (row-major), sum |p - m|^2. Each work-item strides over the pairs; a tree reduction in
-// local memory (work-group size a power of two) leaves one record of 17 floats per group. The host
-// adds the group records in double in group order: no atomics, the same bits every run.
+// The ICP sums over all pairs, centred on `reference` (data frame), each pair weighted by w (1, or
+// the Geman-McClure kernel's weight when scale_squared > 0): count, sum w p', sum w m', sum w p' m'^T
+// (row-major), sum |p - m|^2, sum w. Each work-item strides over the pairs; a tree reduction in
+// local memory (work-group size a power of two) leaves one record of MM_SUM_TERMS floats per group.
+// The host adds the group records in double in group order: no atomics, the same bits every run.
 __kernel void pair_sums(__global const float4* data, __global const float4* best_pair, const int data_count,
                         const float4 reference, const float scale_squared, __global float* partials,
                         __local float* scratch) {

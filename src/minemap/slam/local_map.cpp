@@ -220,7 +220,7 @@ std::vector<WorldModel> JudgingClouds::models(const SurveyState& state, const st
     const auto [at, first_of_block] = whole.try_emplace(b, false);
     if (first_of_block && at_one_place(state, b)) {
       // The block's scans not in near (the judged scan, or a run at either end): one run, left out.
-      const std::size_t size = std::min(kBlockScans, state.size() - b * kBlockScans);
+      const std::size_t size = block_size(state, b);
       const std::uint64_t all = size == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << size) - 1;
       const std::uint64_t out = all & ~in_block[b];
       const int first = out == 0 ? 0 : std::countr_zero(out);
@@ -254,10 +254,11 @@ bool JudgingClouds::at_one_place(const SurveyState& state, std::size_t b) {
   auto [at, fresh] = one_place_.try_emplace(b, false);
   if (fresh) {
     double path_cm = 0.0;
-    for (std::size_t j = b * kBlockScans + 1; j < std::min(state.size(), (b + 1) * kBlockScans); ++j) {
+    const std::size_t first = b * kBlockScans, size = block_size(state, b);
+    for (std::size_t j = first + 1; j < first + size; ++j) {
       path_cm += (state.pose(j).block<3, 1>(0, 3) - state.pose(j - 1).block<3, 1>(0, 3)).norm();
     }
-    const double scans = double(std::min(state.size(), (b + 1) * kBlockScans) - b * kBlockScans);
+    const double scans = double(size);
     at->second = path_cm * double(kOnePlaceScans) <= local_map_.settings_.loops.max_distance_cm * scans;
   }
   return at->second;
@@ -266,12 +267,16 @@ bool JudgingClouds::at_one_place(const SurveyState& state, std::size_t b) {
 const JudgingClouds::Held& JudgingClouds::block(const SurveyState& state, std::size_t b, std::size_t judged) {
   auto [at, fresh] = blocks_.try_emplace(b);
   if (fresh) {
-    std::vector<std::size_t> scans(std::min(kBlockScans, state.size() - b * kBlockScans));
+    std::vector<std::size_t> scans(block_size(state, b));
     for (std::size_t k = 0; k < scans.size(); ++k) scans[k] = b * kBlockScans + k;
     at->second.cloud = local_map_.whole_union(state, scans, state.pose(scans.front()), &at->second.starts);
   }
   at->second.last_used = judged;
   return at->second;
+}
+
+std::size_t JudgingClouds::block_size(const SurveyState& state, std::size_t b) {
+  return std::min(kBlockScans, state.size() - b * kBlockScans);
 }
 
 void JudgingClouds::forget_unused(std::size_t judged) {

@@ -136,6 +136,8 @@ class JudgingClouds {
   const Held& block(const SurveyState& state, std::size_t b, std::size_t judged);
   /// Whether block b's scans stand at one place (kBlockScans), as they stand now.
   bool at_one_place(const SurveyState& state, std::size_t b);
+  /// How many scans block b holds: kBlockScans, or fewer for the survey's last block.
+  static std::size_t block_size(const SurveyState& state, std::size_t b);
 
   const LocalMap& local_map_;
   std::unordered_map<std::size_t, Held> scans_;
