@@ -409,18 +409,37 @@ TEST(MovingMapping, KeyframesRunTheirWideCoarseStageOnTheProbeAtTheSameAccuracy)
   EXPECT_EQ(full.doubtful, 0u);
 }
 
-// Whose metascans are thinned (MotionPrediction::local_map_cell_cm): keyframes without times or
-// odometry are a moving sensor's too, and their local map keeps one point per 10 cm cell as a timed
-// sweep's does (on the four real sequences 0.9-0.99x the time, every mean error lower:
-// docs/benchmarks.md, "Moving LiDAR"); a stop-and-go survey with odometry keeps every point, as the
-// paper matches, and its poses do not depend on the cell at all.
-TEST(MovingMapping, KeyframesWithoutOdometryMatchAThinnedLocalMapAndStopAndGoKeepsEveryPoint) {
+/// The simulated hand-held sweeps as keyframes: no times, no odometry (seed 3, 30 sweeps).
+sim::MovingSurvey handheld_keyframes() {
   sim::MovingSimulationSettings simulation;
   simulation.sensor = sim::MovingSensor::kHandheld;
   simulation.sweeps = 30;
   simulation.mine.seed = 3;
   sim::MovingSurvey keyframes = sim::simulate_moving_survey(simulation);
   for (Scan& scan : keyframes.scans) scan.attributes.time_s.clear();
+  return keyframes;
+}
+
+/// A stop-and-go survey with odometry (4 scans, seed 7) maps to the same poses under both settings.
+void expect_stop_and_go_alike(const MappingSettings& a, const MappingSettings& b) {
+  sim::SimulationSettings stop_and_go;
+  stop_and_go.mine.scans = 4;
+  stop_and_go.mine.seed = 7;
+  const sim::SimulatedSurvey survey = sim::simulate_mine_survey(stop_and_go);
+  CpuBackend cpu;
+  const MappingResult first = map_survey(survey.scans, a, cpu);
+  const MappingResult second = map_survey(survey.scans, b, cpu);
+  ASSERT_EQ(first.scans.size(), 4u);
+  for (std::size_t k = 0; k < first.scans.size(); ++k) EXPECT_EQ(first.scans[k].pose_cm, second.scans[k].pose_cm) << k;
+}
+
+// Whose metascans are thinned (MotionPrediction::local_map_cell_cm): keyframes without times or
+// odometry are a moving sensor's too, and their local map keeps one point per 10 cm cell as a timed
+// sweep's does (on the four real sequences 0.9-0.99x the time, every mean error lower:
+// docs/benchmarks.md, "Moving LiDAR"); a stop-and-go survey with odometry keeps every point, as the
+// paper matches, and its poses do not depend on the cell at all.
+TEST(MovingMapping, KeyframesWithoutOdometryMatchAThinnedLocalMapAndStopAndGoKeepsEveryPoint) {
+  const sim::MovingSurvey keyframes = handheld_keyframes();
   MappingSettings every_point;
   every_point.motion.local_map_cell_cm = 0.0;
   const MovingRun thinned = map_moving(keyframes, MappingSettings{});
@@ -431,32 +450,18 @@ TEST(MovingMapping, KeyframesWithoutOdometryMatchAThinnedLocalMapAndStopAndGoKee
   EXPECT_NE(thinned.errors.mean_translation_cm, all.errors.mean_translation_cm);  // the cell is used
   EXPECT_LT(thinned.errors.mean_translation_cm, 1.5 * all.errors.mean_translation_cm);
   EXPECT_EQ(thinned.doubtful, 0u);
-
-  sim::SimulationSettings stop_and_go;
-  stop_and_go.mine.scans = 4;
-  stop_and_go.mine.seed = 7;
-  const sim::SimulatedSurvey survey = sim::simulate_mine_survey(stop_and_go);
-  CpuBackend cpu;
   MappingSettings coarse;
   coarse.motion.local_map_cell_cm = 50.0;
-  const MappingResult paper = map_survey(survey.scans, MappingSettings{}, cpu);
-  const MappingResult other = map_survey(survey.scans, coarse, cpu);
-  ASSERT_EQ(paper.scans.size(), 4u);
-  for (std::size_t k = 0; k < paper.scans.size(); ++k) EXPECT_EQ(paper.scans[k].pose_cm, other.scans[k].pose_cm) << k;
+  expect_stop_and_go_alike(MappingSettings{}, coarse);
 }
 
-// The robust kernel of the wide matches' coarse stage (MotionSettings::wide_coarse_kernel_fraction)
-// weighs the pairs of scans that constant velocity places: keyframes without odometry are matched
-// with it once their bound is learned (and land as well as without it), a stop-and-go survey with
-// odometry keeps the paper's sums, its poses not depending on the setting at all. The figures on
-// real keyframes are in docs/benchmarks.md ("A robust kernel in the coarse stage").
+// The robust kernel of a keyframe's first wide match (MotionSettings::wide_coarse_kernel_fraction,
+// once its bound is learned): keyframes without odometry are matched with it (and land as well as
+// without it); a stop-and-go survey with odometry keeps the paper's sums, its poses not depending
+// on the setting at all. The figures on real keyframes are in docs/benchmarks.md ("A robust kernel
+// in the keyframes' coarse stage").
 TEST(MovingMapping, KeyframesWeighTheirWideCoarseStageAndStopAndGoKeepsThePapersSums) {
-  sim::MovingSimulationSettings simulation;
-  simulation.sensor = sim::MovingSensor::kHandheld;
-  simulation.sweeps = 30;
-  simulation.mine.seed = 3;
-  sim::MovingSurvey keyframes = sim::simulate_moving_survey(simulation);
-  for (Scan& scan : keyframes.scans) scan.attributes.time_s.clear();
+  const sim::MovingSurvey keyframes = handheld_keyframes();
   MappingSettings unweighted;
   unweighted.motion.wide_coarse_kernel_fraction = 0.0;
   const MovingRun weighted = map_moving(keyframes, MappingSettings{});
@@ -468,18 +473,9 @@ TEST(MovingMapping, KeyframesWeighTheirWideCoarseStageAndStopAndGoKeepsThePapers
   EXPECT_LT(weighted.errors.mean_translation_cm, 1.5 * plain.errors.mean_translation_cm);
   EXPECT_LT(weighted.errors.mean_relative_translation_cm, 1.25 * plain.errors.mean_relative_translation_cm);
   EXPECT_EQ(weighted.doubtful, 0u);
-
-  sim::SimulationSettings stop_and_go;
-  stop_and_go.mine.scans = 4;
-  stop_and_go.mine.seed = 7;
-  const sim::SimulatedSurvey survey = sim::simulate_mine_survey(stop_and_go);
-  CpuBackend cpu;
   MappingSettings strong;
   strong.motion.wide_coarse_kernel_fraction = 0.1;
-  const MappingResult paper = map_survey(survey.scans, unweighted, cpu);
-  const MappingResult other = map_survey(survey.scans, strong, cpu);
-  ASSERT_EQ(paper.scans.size(), 4u);
-  for (std::size_t k = 0; k < paper.scans.size(); ++k) EXPECT_EQ(paper.scans[k].pose_cm, other.scans[k].pose_cm) << k;
+  expect_stop_and_go_alike(unweighted, strong);
 }
 
 TEST(MovingMapping, TheCoarseKernelMustBeAFiniteFractionOrZero) {
