@@ -220,8 +220,8 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
        "A sweep's first match, before its deskew is refined, matches all its points (the default matches the "
        "health probe's, every --health-probe-stride-th)");
   number(g, "--wide-coarse-kernel", mapping.motion.wide_coarse_kernel_fraction,
-         "A moving sensor's wide matches weigh the pairs of their coarse stage by a Geman-McClure kernel at this "
-         "fraction of the bound (0 = off: every pair weighs 1)");
+         "Keyframes without times or odometry: once the adaptive bound is learned, the first match's coarse stage "
+         "weighs its pairs by a Geman-McClure kernel at this fraction of the bound (0 = off: every pair weighs 1)");
   flag(g, "--wide-coarse-all-points", map.wide_coarse_all_points,
        "The first match at the adaptive bound runs its coarse stage on all the scan's points (the default: the "
        "health probe's; the fine stage matches all of them)");
