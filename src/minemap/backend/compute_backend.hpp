@@ -26,6 +26,7 @@
 #include "minemap/filter/voxel_filter.hpp"
 #include "minemap/search/pair_sums.hpp"
 #include "minemap/search/pairing.hpp"
+#include "minemap/search/plane_sums.hpp"
 
 namespace minemap {
 
@@ -85,7 +86,17 @@ class ComputeBackend {
   virtual PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models,
                                 SearchMethod method, const PairingSettings& settings) = 0;
 
-  /// The closest pair of every data point (tests, diagnostics).
+  /// Pairs as pair_and_sum does and returns the point-to-plane sums (search/plane_sums.hpp) of the
+  /// data's planes, `data_normals` one per data point (zero: no plane), centred on the data
+  /// cloud's centroid. This default pairs with nearest() and sums on the host; a backend that sums
+  /// while it searches must give the same bits (the same blocks, in the same order).
+  virtual PlaneSums pair_and_plane_sum(const PreparedCloud& data, std::span<const ModelPlacement> models,
+                                       SearchMethod method, const PairingSettings& settings,
+                                       std::span<const Eigen::Vector3f> data_normals) {
+    return plane_sums(nearest(data, models, method, settings), data.points(), data_normals, data.centroid_cm());
+  }
+
+  /// The closest pair of every data point (tests, diagnostics, and the default point-to-plane sums).
   virtual std::vector<NearestPair> nearest(const PreparedCloud& data, std::span<const ModelPlacement> models,
                                            SearchMethod method, const PairingSettings& settings) = 0;
 

@@ -6,6 +6,7 @@
 
 #include <array>
 #include <limits>
+#include <stdexcept>
 
 #include "minemap/filter/slice_filter_cpu.hpp"
 #include "minemap/search/pairing_math.hpp"
@@ -132,6 +133,35 @@ PairSums CpuBackend::pair_and_sum(const PreparedCloud& data, std::span<const Mod
     }
   });
   PairSums total;
+  total.reference_cm = reference;
+  for (const auto& s : partial) total += s;
+  return total;
+}
+
+PlaneSums CpuBackend::pair_and_plane_sum(const PreparedCloud& data, std::span<const ModelPlacement> models,
+                                         SearchMethod method, const PairingSettings& settings,
+                                         std::span<const Eigen::Vector3f> data_normals) {
+  const auto points = data.points();
+  if (data_normals.size() != points.size()) {
+    throw std::invalid_argument("point-to-plane sums: one normal per data point expected");
+  }
+  const auto placed = place_models(models, method);
+  const Eigen::Vector3d reference = data.centroid_cm();
+  const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
+  const std::size_t blocks = (points.size() + kQueriesPerBlock - 1) / kQueriesPerBlock;
+  std::vector<PlaneSums> partial(blocks);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<std::int32_t> hints(placed.size(), -1);
+    for (std::size_t b = range.begin(); b != range.end(); ++b) {
+      PlaneSums& sums = partial[b];  // one block's sums, as plane_sums makes them
+      sums.reference_cm = reference;
+      const std::size_t end = std::min(points.size(), (b + 1) * kQueriesPerBlock);
+      for (std::size_t i = b * kQueriesPerBlock; i < end; ++i) {
+        sums.add(points[i], data_normals[i], find_nearest(points[i], placed, method, max_squared, hints.data()));
+      }
+    }
+  });
+  PlaneSums total;
   total.reference_cm = reference;
   for (const auto& s : partial) total += s;
   return total;

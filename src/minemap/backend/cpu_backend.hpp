@@ -21,6 +21,9 @@ class CpuBackend final : public ComputeBackend {
                                                                  TreeBuild when = TreeBuild::kNow) override;
   PairSums pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
                         const PairingSettings& settings) override;
+  /// Sums each block's pairs as it finds them (the default's bits: plane_sums' blocks).
+  PlaneSums pair_and_plane_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
+                               const PairingSettings& settings, std::span<const Eigen::Vector3f> data_normals) override;
   std::vector<NearestPair> nearest(const PreparedCloud& data, std::span<const ModelPlacement> models,
                                    SearchMethod method, const PairingSettings& settings) override;
   /// The voxel means are the host's voxel_mean_filter (the base class's), a pure function.

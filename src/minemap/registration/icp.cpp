@@ -10,6 +10,7 @@
 
 #include "minemap/registration/anderson_acceleration.hpp"
 #include "minemap/registration/horn.hpp"
+#include "minemap/registration/point_to_plane.hpp"
 
 namespace minemap {
 
@@ -43,6 +44,18 @@ void IcpSettings::validate() const {
 
 namespace {
 
+/// One pairing as ICP's loop reads it, whichever the objective: the backend's point-to-point sums,
+/// or the point-to-plane system summed on the host from the backend's pairs.
+struct Pairing {
+  PairSums sums;
+  PlaneSums plane;
+  bool planar = false;
+  double count() const { return planar ? plane.count : sums.count; }
+  double rms_cm() const { return planar ? plane.rms_cm() : sums.rms_cm(); }
+  /// The objective's sum over the pairs (squared distances, or the planes' residuals).
+  double residual_cm2() const { return planar ? plane.sum_squared_residual_cm2 : sums.sum_squared_distance_cm2; }
+};
+
 /// How a phase ended. kErrorRose: the approximate phase stopped because E(R, t) stopped falling.
 enum class PhaseEnd { kConverged, kErrorRose, kIterationCap, kFailed };
 
@@ -51,11 +64,12 @@ enum class PhaseEnd { kConverged, kErrorRose, kIterationCap, kFailed };
 class IcpRun {
  public:
   IcpRun(ComputeBackend& backend, const PreparedCloud& data, const Pose& start, std::span<const WorldModel> models,
-         const IcpSettings& settings)
+         const IcpSettings& settings, std::span<const Eigen::Vector3f> data_normals)
       : backend_(backend),
         data_(data),
         models_(models),
         settings_(settings),
+        data_normals_(data_normals),
         start_(start),
         pose_(start),
         min_pairs_(std::max(3, settings.termination.min_pairs)),
@@ -69,8 +83,8 @@ class IcpRun {
   PhaseEnd approximate() {
     double previous_rms = std::numeric_limits<double>::infinity();
     for (bool first = true; budget_left(); first = false) {
-      const PairSums sums = pair(SearchMethod::kApproximate, settings_.max_pair_dist_cm);
-      if (sums.count < min_pairs_) return fail(IcpStop::kTooFewPairs, sums);
+      const Pairing sums = pair(SearchMethod::kApproximate, settings_.max_pair_dist_cm);
+      if (sums.count() < min_pairs_) return fail(IcpStop::kTooFewPairs, sums);
       if (!first && !(sums.rms_cm() < previous_rms)) return PhaseEnd::kErrorRose;
       previous_rms = sums.rms_cm();
       const auto step = horn_step(sums);
@@ -93,11 +107,11 @@ class IcpRun {
     Pose plain_pose = pose_;  // where the last plain step landed, before the jump
     double objective_before_jump = 0.0;
     while (budget_left()) {
-      const PairSums sums = pair(method, bound_cm);
+      const Pairing sums = pair(method, bound_cm);
       const double objective = objective_of(sums, bound_cm);
       if (jumped) {
         jumped = false;
-        if (!(objective < objective_before_jump) || sums.count < min_pairs_) {
+        if (!(objective < objective_before_jump) || sums.count() < min_pairs_) {
           pose_ = plain_pose;  // take the jump back; its pairing is the cost
           --result_.accelerations;
           ++result_.rejected_accelerations;
@@ -105,7 +119,7 @@ class IcpRun {
           accelerator.reset(pose_);
           continue;
         }
-      } else if (sums.count < min_pairs_) {
+      } else if (sums.count() < min_pairs_) {
         return fail(IcpStop::kTooFewPairs, sums);
       }
       const auto step = horn_step(sums);
@@ -141,33 +155,41 @@ class IcpRun {
 
   /// Pair and sum at the current pose: the closest model point of every data point within the
   /// bound, over the union of the models.
-  PairSums pair(SearchMethod method, float bound_cm) {
+  Pairing pair(SearchMethod method, float bound_cm) {
     placed_.clear();
     for (const auto& m : models_) placed_.push_back({m.cloud, rigid_inverse(m.world_from_model) * pose_, m.skip});
-    return backend_.pair_and_sum(data_, placed_, method,
-                                 PairingSettings{bound_cm, bound_cm * settings_.robust_scale_fraction});
+    Pairing pairing;
+    if (settings_.objective == IcpObjective::kPointToPlane) {
+      pairing.planar = true;
+      pairing.plane = backend_.pair_and_plane_sum(data_, placed_, method, PairingSettings{bound_cm}, data_normals_);
+      return pairing;
+    }
+    pairing.sums = backend_.pair_and_sum(data_, placed_, method,
+                                         PairingSettings{bound_cm, bound_cm * settings_.robust_scale_fraction});
+    return pairing;
   }
 
   /// ICP's objective with the pair bound: every data point costs its squared pair distance, or the
   /// bound squared when unpaired. Unlike the RMS over pairs (pairs come and go), a plain ICP step
   /// never raises it, so it can judge a jump.
-  double objective_of(const PairSums& sums, float bound_cm) const {
+  double objective_of(const Pairing& sums, float bound_cm) const {
     const double bound = bound_cm;
-    return sums.sum_squared_distance_cm2 + (static_cast<double>(data_.points().size()) - sums.count) * bound * bound;
+    return sums.residual_cm2() + (static_cast<double>(data_.points().size()) - sums.count()) * bound * bound;
   }
 
-  /// Horn's closed form for the pairs: the rigid step (data frame) that minimises E(R, t).
-  static std::optional<Pose> horn_step(const PairSums& sums) {
-    auto step = horn_transform(sums);
+  /// Horn's closed form for the pairs: the rigid step (data frame) that minimises E(R, t); or the
+  /// point-to-plane system's step.
+  static std::optional<Pose> horn_step(const Pairing& sums) {
+    auto step = sums.planar ? plane_step(sums.plane) : horn_transform(sums.sums);
     if (step && !is_valid_rigid(*step, 1e-6)) step.reset();
     return step;
   }
 
   /// Composes the step onto the pose and counts the iteration; false when the pose is not finite.
-  bool take(const Pose& step, const PairSums& sums, int& phase_iterations) {
+  bool take(const Pose& step, const Pairing& sums, int& phase_iterations) {
     pose_ = pose_ * step;
     ++phase_iterations;
-    result_.pairs = static_cast<std::size_t>(sums.count);
+    result_.pairs = static_cast<std::size_t>(sums.count());
     result_.rms_cm = sums.rms_cm();
     return pose_.allFinite();
   }
@@ -177,9 +199,9 @@ class IcpRun {
            rotation_angle_deg(step) < settings_.termination.min_rotation_step_deg;
   }
 
-  PhaseEnd fail(IcpStop why, const PairSums& sums) {
+  PhaseEnd fail(IcpStop why, const Pairing& sums) {
     result_.stop = why;
-    if (why == IcpStop::kTooFewPairs) result_.pairs = static_cast<std::size_t>(sums.count);
+    if (why == IcpStop::kTooFewPairs) result_.pairs = static_cast<std::size_t>(sums.count());
     result_.world_from_data = start_;
     return PhaseEnd::kFailed;
   }
@@ -188,6 +210,7 @@ class IcpRun {
   const PreparedCloud& data_;
   std::span<const WorldModel> models_;
   const IcpSettings& settings_;
+  std::span<const Eigen::Vector3f> data_normals_;
   Pose start_, pose_;
   double min_pairs_;
   detail::MotionFrame frame_;
@@ -198,8 +221,12 @@ class IcpRun {
 }  // namespace
 
 IcpResult register_icp(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
-                       std::span<const WorldModel> models, const IcpSettings& settings) {
-  IcpRun run(backend, data, world_from_data, models, settings);
+                       std::span<const WorldModel> models, const IcpSettings& settings,
+                       std::span<const Eigen::Vector3f> data_normals) {
+  if (settings.objective == IcpObjective::kPointToPlane && data_normals.size() != data.points().size()) {
+    throw std::invalid_argument("point-to-plane ICP needs one normal per data point");
+  }
+  IcpRun run(backend, data, world_from_data, models, settings, data_normals);
   const SearchMethod exact = settings.method == SearchMethod::kBruteForce ? SearchMethod::kBruteForce : SearchMethod::kExact;
   const float refine_bound = settings.refine_max_pair_dist_cm();
   const bool refine = refine_bound > 0.0f && refine_bound < settings.max_pair_dist_cm;

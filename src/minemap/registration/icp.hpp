@@ -5,7 +5,9 @@
 //   2. exact search until the step is small (usually 1-3 more iterations after phase 1);
 //   3. optionally, exact search again at a tighter pair bound (refinement), until the step is small.
 // Anderson acceleration (AA-ICP), when on, wraps the exact phases with its own accept/reject test.
-// The objective is point-to-point (search/pair_sums.hpp); the search and the sums run in the backend.
+// The objective is point-to-point (search/pair_sums.hpp; the search and the sums run in the backend),
+// or, where asked, point-to-plane on the data's planes (point_to_plane.hpp; the backend pairs, the
+// host sums).
 #include <span>
 #include <string>
 
@@ -25,6 +27,12 @@ struct IcpTermination {
   /// the paper's overlap test (MappingSettings::min_overlap_pairs) starts from it.
   int min_pairs = 250;
   bool operator==(const IcpTermination&) const = default;
+};
+
+/// What one ICP step minimises.
+enum class IcpObjective {
+  kPointToPoint,  ///< the paper's: squared distances of the pairs, Horn's closed form
+  kPointToPlane,  ///< squared distances to the data's planes (point_to_plane.hpp); needs the data's normals
 };
 
 /// ICP's settings. IcpSettings{} (= paper()) is the paper's ICP. The mapping presets' ICPs are in
@@ -52,6 +60,9 @@ struct IcpSettings {
   /// fraction of the pair bound, Horn's method then taking the weighted sums (KISS-ICP: a third).
   /// 0: every pair weighs 1, the paper's ICP.
   float robust_scale_fraction = 0.0f;
+  /// kPointToPlane: register_icp must be given the data's normals; the robust kernel is then not
+  /// applied (the planes' residuals are unweighted).
+  IcpObjective objective = IcpObjective::kPointToPoint;
 
   /// The paper's ICP: approximate then exact search, 25 cm, plain steps.
   static IcpSettings paper() { return {}; }
@@ -95,8 +106,11 @@ struct WorldModel {
 
 /// Registers `data` (initially at `world_from_data`) against the union of `models`. The clouds
 /// must come from `backend`. `settings` are not checked here (IcpSettings::validate).
+/// `data_normals`: one per data point (unit, or zero where the point lies on no plane), required
+/// for IcpObjective::kPointToPlane (std::invalid_argument otherwise), unused for point-to-point.
 IcpResult register_icp(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
-                       std::span<const WorldModel> models, const IcpSettings& settings);
+                       std::span<const WorldModel> models, const IcpSettings& settings,
+                       std::span<const Eigen::Vector3f> data_normals = {});
 
 /// Pairs between `data` and one model at the given poses (exact search): the paper's overlap test.
 std::size_t count_pairs(ComputeBackend& backend, const PreparedCloud& data, const Pose& world_from_data,
