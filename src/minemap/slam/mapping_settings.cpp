@@ -85,7 +85,7 @@ bool MappingSettings::voxel_models() const {
 }
 
 bool MappingSettings::needs_planes() const {
-  return health.enabled || (loops.enabled && loops.information_from_geometry);
+  return health.enabled || (loops.enabled && loops.information_from_geometry) || motion.plane_objective;
 }
 
 void MappingSettings::validate() const {

@@ -14,9 +14,17 @@ bool MotionPrediction::constant_velocity_at(const SurveyState& state, std::size_
   return false;
 }
 
+bool MotionPrediction::moving(const SurveyState& state, std::size_t i) const {
+  return state.prepared(i).sweep_s > 0.0 || constant_velocity_at(state, i);
+}
+
+IcpObjective MotionPrediction::fine_objective(const SurveyState& state, std::size_t i) const {
+  return settings_.motion.plane_objective && moving(state, i) ? IcpObjective::kPointToPlane
+                                                                : IcpObjective::kPointToPoint;
+}
+
 double MotionPrediction::local_map_cell_cm(const SurveyState& state, std::size_t i) const {
-  const bool moving = state.prepared(i).sweep_s > 0.0 || constant_velocity_at(state, i);
-  return moving ? settings_.motion.local_map_cell_cm : 0.0;
+  return moving(state, i) ? settings_.motion.local_map_cell_cm : 0.0;
 }
 
 Pose MotionPrediction::file_pose(const SurveyState& state, std::size_t i, const Pose& world_from_points) {
@@ -34,6 +42,7 @@ double MotionPrediction::time_ratio(const SurveyState& state, std::size_t a, std
 Prediction MotionPrediction::predict(const SurveyState& state, std::size_t i) const {
   Prediction prediction;
   prediction.start_bound_cm = settings_.pairwise_icp().max_pair_dist_cm;
+  prediction.objectives.fine = fine_objective(state, i);
   if (!constant_velocity_at(state, i)) {
     const Pose odometry_step = rigid_inverse(state.odometry(i - 1)) * state.odometry(i);
     prediction.start = state.pose(i - 1) * odometry_step;
@@ -52,7 +61,7 @@ Prediction MotionPrediction::predict(const SurveyState& state, std::size_t i) co
   // it again, and there the kernel lost the simulated spinning loop's closure (docs/benchmarks.md).
   if (settings_.motion.wide_coarse_kernel_fraction > 0.0 && !(state.prepared(i).sweep_s > 0.0) &&
       recent_error(state, i).count > 0) {
-    prediction.coarse_kernel_fraction = static_cast<float>(settings_.motion.wide_coarse_kernel_fraction);
+    prediction.objectives.coarse_kernel_fraction = static_cast<float>(settings_.motion.wide_coarse_kernel_fraction);
   }
   return prediction;
 }

@@ -14,6 +14,7 @@
 
 #include "minemap/core/pose.hpp"
 #include "minemap/slam/mapping_settings.hpp"
+#include "minemap/slam/scan_registration.hpp"
 #include "minemap/slam/survey_state.hpp"
 
 namespace minemap::detail {
@@ -32,11 +33,12 @@ struct Prediction {
   Pose start = Pose::Identity();  ///< T_world_points
   bool constant_velocity = false; ///< predicted from the previous steps, not from odometry
   float start_bound_cm = 0.0f;    ///< the pair bound its first match starts at (>= the pair bound)
-  /// The robust kernel of that first match's coarse stage (IcpSettings::robust_scale_fraction):
+  /// What its matches minimise. The robust kernel of the first match's coarse stage:
   /// MotionSettings::wide_coarse_kernel_fraction for a keyframe without times whose bound was
   /// learned from trusted matches (a start as near as the recent ones were); 0 (the paper's sums)
-  /// before there are any, and for timed sweeps.
-  float coarse_kernel_fraction = 0.0f;
+  /// before there are any, and for timed sweeps. The fine objective: point-to-plane for a moving
+  /// sensor (MotionSettings::plane_objective), the paper's point-to-point for stop-and-go scans.
+  MatchObjectives objectives;
 };
 
 class MotionPrediction {
@@ -59,6 +61,13 @@ class MotionPrediction {
   /// as the paper) for a stop-and-go survey's. (A keyframe's recovery describes its features on
   /// every point: thinned, its FPFH start was worse on 3 of the 4 real sequences.)
   double local_map_cell_cm(const SurveyState& state, std::size_t i) const;
+  /// Whether scan i is a moving sensor's: a timed sweep, or a scan constant velocity places (no
+  /// odometry). Stop-and-go surveys keep the paper's matching.
+  bool moving(const SurveyState& state, std::size_t i) const;
+  /// What scan i's matches minimise after their coarse stage (MatchObjectives::fine), whatever
+  /// their start: point-to-plane for a moving sensor's scan (MotionSettings::plane_objective),
+  /// the paper's point-to-point otherwise. The one place that chooses it.
+  IcpObjective fine_objective(const SurveyState& state, std::size_t i) const;
   /// The sensor's motion over scan j's sweep (start to end, its own file frame, cm) if it stood at
   /// T_world_points `pose_j` and scan `other` (j-1 or j+1) where the state holds it: the step
   /// between them at constant velocity, scaled by the sweep's duration over the time between their

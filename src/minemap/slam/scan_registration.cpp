@@ -25,15 +25,29 @@ IcpSettings ScanRegistration::icp_for(const PreparedScan& scan, Convergence conv
   return icp;
 }
 
+IcpResult ScanRegistration::run_icp(const PreparedScan& scan, const PreparedCloud& data, const Pose& start,
+                                    std::span<const WorldModel> models, IcpSettings icp, IcpObjective objective) const {
+  std::vector<Eigen::Vector3f> normals;
+  if (objective == IcpObjective::kPointToPlane && scan.planes) {
+    icp.objective = objective;
+    normals.reserve(data.points().size());
+    for (const Eigen::Vector3f& p : data.points()) {
+      const Eigen::Vector3f* normal = scan.planes->at(p);
+      normals.push_back(normal != nullptr ? *normal : Eigen::Vector3f::Zero());
+    }
+  }
+  return register_icp(backend_, data, start, models, icp, normals);
+}
+
 WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, const Pose& start,
                                                   std::span<const WorldModel> models, float bound_cm,
                                                   Convergence convergence, bool coarse_on_probe,
-                                                  float coarse_kernel_fraction) const {
+                                                  const MatchObjectives& objectives) const {
   const IcpSettings icp = icp_for(scan, convergence);
   IcpSettings wide = icp;
   wide.max_pair_dist_cm = bound_cm;
   wide.refine_pair_dist_fraction = 0.0f;
-  wide.robust_scale_fraction = coarse_kernel_fraction;
+  wide.robust_scale_fraction = objectives.coarse_kernel_fraction;
   WideMatch match;
   const PreparedCloud& coarse_data = coarse_on_probe ? *scan.probe : data_of(scan, convergence);
   if (coarse_on_probe) wide.termination.min_pairs = settings_.min_pairs_for(coarse_data.points().size());
@@ -44,7 +58,7 @@ WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, cons
     match.failed = coarse;
     return match;
   }
-  IcpResult fine = register_icp(backend_, data_of(scan, convergence), coarse.world_from_data, models, icp);
+  IcpResult fine = run_icp(scan, data_of(scan, convergence), coarse.world_from_data, models, icp, objectives.fine);
   match.iterations += fine.iterations();
   if (!fine.ok()) {
     match.failure = to_string(fine.stop);
@@ -59,7 +73,7 @@ WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, cons
 
 ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& start,
                                           const ModelsForBound& models_for, float start_bound_cm,
-                                          Convergence convergence, float coarse_kernel_fraction) const {
+                                          Convergence convergence, const MatchObjectives& objectives) const {
   ScanMatch match;
   float widest_cm = icp_.max_pair_dist_cm;
   if (start_bound_cm > widest_cm) {
@@ -67,7 +81,7 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
     const std::vector<WorldModel> models = models_for(start_bound_cm, start);
     WideMatch wide =
         match_from_wide_bound(scan, start, models, start_bound_cm, convergence, settings_.motion.wide_coarse_probe,
-                              coarse_kernel_fraction);
+                              objectives);
     match.iterations = wide.iterations;
     if (!wide.fine) {
       match.first = wide.failed;
@@ -78,7 +92,7 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
     widest_cm = start_bound_cm;
   } else {
     const std::vector<WorldModel> models = models_for(icp_.max_pair_dist_cm, start);
-    match.first = register_icp(backend_, data_of(scan, convergence), start, models, icp_for(scan, convergence));
+    match.first = run_icp(scan, data_of(scan, convergence), start, models, icp_for(scan, convergence), objectives.fine);
     match.iterations = match.first.iterations();
     if (!match.first.ok()) return match;
     match.health = judge(scan, match.first.world_from_data, start, models);
@@ -93,7 +107,8 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
     if (bound <= widest_cm) continue;
     widest_cm = bound;
     const std::vector<WorldModel> wide_models = models_for(bound, match.first.world_from_data);
-    WideMatch retry = match_from_wide_bound(scan, start, wide_models, bound, convergence);
+    WideMatch retry =
+        match_from_wide_bound(scan, start, wide_models, bound, convergence, false, {0.0f, objectives.fine});
     match.iterations += retry.iterations;
     if (!retry.fine) continue;
     if (retry.health.doubtful()) {

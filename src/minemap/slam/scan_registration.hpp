@@ -53,6 +53,19 @@ using ModelsForBound = std::function<std::vector<WorldModel>(float bound_cm, con
 /// provisional_probe says so.
 enum class Convergence { kFinal, kProvisional };
 
+/// What a scan's matches minimise where it is not the paper's point-to-point ICP alone
+/// (MotionPrediction::predict chooses them; the defaults are the paper's).
+struct MatchObjectives {
+  /// The robust kernel of the first wide match's coarse stage (IcpSettings::robust_scale_fraction;
+  /// 0: the paper's sums). Retries, for starts out of reach, keep the paper's sums: the kernel would
+  /// weigh every far pair down and hold the scan where it is.
+  float coarse_kernel_fraction = 0.0f;
+  /// The objective of every fine stage and of every match at the pair bound (retries' too; coarse
+  /// stages stay point-to-point): point-to-plane on the scan's own planes (PreparedScan::planes;
+  /// point-to-point where it has none) for a moving sensor (MotionSettings::plane_objective).
+  IcpObjective fine = IcpObjective::kPointToPoint;
+};
+
 class ScanRegistration {
  public:
   ScanRegistration(const MappingSettings& settings, ComputeBackend& backend)
@@ -64,20 +77,18 @@ class ScanRegistration {
   /// Registers `scan` from `start` and judges the match; a doubtful one is tried again from the
   /// same start at each wider bound, until one is trusted. `start_bound_cm` wider than the pair
   /// bound (the motion model's adaptive bound): the first match already starts there, coarse to fine.
-  /// `coarse_kernel_fraction`: the robust kernel of that first wide match's coarse stage
-  /// (Prediction::coarse_kernel_fraction; 0: the paper's sums). Retries, for starts out of reach,
-  /// keep the paper's sums: the kernel would weigh every far pair down and hold the scan where it is.
+  /// `objectives`: what its matches minimise (Prediction::objectives).
   ScanMatch register_scan(const PreparedScan& scan, const Pose& start, const ModelsForBound& models_for,
                           float start_bound_cm = 0.0f, Convergence convergence = Convergence::kFinal,
-                          float coarse_kernel_fraction = 0.0f) const;
+                          const MatchObjectives& objectives = {}) const;
 
   /// ICP at `bound_cm` from `start` (no refinement), then the usual phases from where that ended,
   /// judged with the reach of the wide bound. `coarse_on_probe`: the first ICP on the health probe's
-  /// points (MotionSettings::wide_coarse_probe); `coarse_kernel_fraction`: that ICP's robust kernel
-  /// (IcpSettings::robust_scale_fraction).
+  /// points (MotionSettings::wide_coarse_probe); `objectives`: that ICP's robust kernel and the
+  /// objective of the phases after it.
   WideMatch match_from_wide_bound(const PreparedScan& scan, const Pose& start, std::span<const WorldModel> models,
                                   float bound_cm, Convergence convergence = Convergence::kFinal,
-                                  bool coarse_on_probe = false, float coarse_kernel_fraction = 0.0f) const;
+                                  bool coarse_on_probe = false, const MatchObjectives& objectives = {}) const;
 
   /// The health of `scan` at `pose`, moved there from `start`, against `models`, at the pair bound
   /// (the reach test at `reach_bound_cm` when > 0).
@@ -90,6 +101,11 @@ class ScanRegistration {
   /// The ICP for `scan`: icp_, asking for no more pairs than the points matched allow
   /// (MappingSettings::min_pairs_for), converging as asked.
   IcpSettings icp_for(const PreparedScan& scan, Convergence convergence) const;
+  /// register_icp of `data` (the scan's cloud or its probe) with `objective`: point-to-plane takes
+  /// the normal of each point's cell among the scan's planes (zero where none), and is point-to-
+  /// point for a scan without planes.
+  IcpResult run_icp(const PreparedScan& scan, const PreparedCloud& data, const Pose& start,
+                    std::span<const WorldModel> models, IcpSettings icp, IcpObjective objective) const;
 
   const MappingSettings& settings_;
   ComputeBackend& backend_;

@@ -152,15 +152,15 @@ void SurveyMatcher::restore_counters(const MappingResult& saved) {
 }
 
 ScanMatch SurveyMatcher::match_pairwise(std::size_t i, const Pose& start, float start_bound_cm,
-                                        Convergence convergence, float coarse_kernel_fraction) const {
+                                        Convergence convergence, const MatchObjectives& objectives) const {
   const std::size_t previous[] = {i - 1};
   return registration_.register_scan(
       state_.prepared(i), start, [&](float, const Pose&) { return state_.models_of(previous); }, start_bound_cm,
-      convergence, coarse_kernel_fraction);
+      convergence, objectives);
 }
 
 ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, float start_bound_cm,
-                                           Convergence convergence, float coarse_kernel_fraction) const {
+                                           Convergence convergence, const MatchObjectives& objectives) const {
   // In the frame of scan i-1, so the metascan's float coordinates stay small wherever the survey
   // is; the metascans made for each bound live until the scan is registered.
   const Pose frame = state_.pose(i - 1);
@@ -182,15 +182,15 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, flo
         local_map_.metascan(state_, i, standing, frame, start, grow_cm, thin_cm));
     if (thin_cm > 0.0 && standing == start) last = {i, bound_cm, frame, start, metascans.back()};
     return std::vector<WorldModel>{{metascans.back().get(), frame}};
-  }, start_bound_cm, convergence, coarse_kernel_fraction);
+  }, start_bound_cm, convergence, objectives);
 }
 
 ScanMatch SurveyMatcher::match_from(std::size_t i, const Prediction& prediction, Convergence convergence) const {
   return settings_.mode == MatchingMode::kIncremental
              ? match_incremental(i, prediction.start, prediction.start_bound_cm, convergence,
-                                 prediction.coarse_kernel_fraction)
+                                 prediction.objectives)
              : match_pairwise(i, prediction.start, prediction.start_bound_cm, convergence,
-                              prediction.coarse_kernel_fraction);
+                              prediction.objectives);
 }
 
 void SurveyMatcher::place(std::size_t i, const ScanMatch& match, const Pose& start) {
@@ -222,6 +222,7 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
   // The second start: where the scan's features put it (independent of any motion model), in a
   // sequence without odometry where recovery is on and they find it; else the other model's.
   Prediction other;
+  other.objectives.fine = motion_.fine_objective(state_, i);
   const RecoveredStart* features =
       recovery_on(i) && motion_.constant_velocity_at(state_, i) ? &features_start(i) : nullptr;
   const bool from_features = features != nullptr && features->global.found;
@@ -330,6 +331,7 @@ void SurveyMatcher::prefer_prediction_along_slide(std::size_t i, const Predictio
   const double slid_cm = along_cm(match.kept().world_from_data);
   if (!(std::abs(slid_cm) > bound_cm)) return;
   Prediction here;
+  here.objectives.fine = motion_.fine_objective(state_, i);
   here.start = without_move_along(prediction.start, match.kept().world_from_data, weakest);
   here.start_bound_cm = static_cast<float>(bound_cm);
   const LastMetascan first_metascan = last_metascan_;  // a second match not kept changes nothing
@@ -385,6 +387,7 @@ void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMat
     return;
   }
   Prediction from_features;
+  from_features.objectives.fine = motion_.fine_objective(state_, i);
   from_features.start = found.start;
   ScanMatch again = match_from(i, from_features, convergence);
   step1_iterations_ += again.iterations;
@@ -457,6 +460,7 @@ void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTim
   const RegistrationHealth first_health = state_.health(i);
   if (deskew_again) state_.set_prepared(i, preparation_.prepare(raw, control_, timing, refined));
   Prediction here;
+  here.objectives.fine = motion_.fine_objective(state_, i);
   here.start = state_.pose(i);
   here.start_bound_cm = settings_.pairwise_icp().max_pair_dist_cm;
   ScanMatch again = match_from(i, here);

@@ -81,9 +81,9 @@ class SurveyMatcher {
   /// Step 1 (and the pairwise mode): scan i against scan i-1. Incremental: against the metascan.
   /// `convergence`: provisional for a sweep's matches before its deskew is refined.
   ScanMatch match_pairwise(std::size_t i, const Pose& start, float start_bound_cm, Convergence convergence,
-                           float coarse_kernel_fraction) const;
+                           const MatchObjectives& objectives) const;
   ScanMatch match_incremental(std::size_t i, const Pose& start, float start_bound_cm, Convergence convergence,
-                              float coarse_kernel_fraction) const;
+                              const MatchObjectives& objectives) const;
   ScanMatch match_from(std::size_t i, const Prediction& prediction,
                        Convergence convergence = Convergence::kFinal) const;
   /// A retry that landed far from the prediction, or a constant-velocity match that moved the sensor
