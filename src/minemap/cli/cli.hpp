@@ -63,7 +63,7 @@ struct MapOptions {
   bool no_recovery = false;
   bool provisional_all_points = false;
   bool wide_coarse_all_points = false;
-  bool moving_point_to_point = false;
+  bool moving_point_to_plane = false;
   bool no_loops = false;
   int threads = 0;            ///< worker threads (0: all cores)
   /// The prepared clouds a long survey holds at most on the CPU (MemoryBound), MB; 0: all.

@@ -222,9 +222,9 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
   number(g, "--wide-coarse-kernel", mapping.motion.wide_coarse_kernel_fraction,
          "Keyframes without times or odometry: once the adaptive bound is learned, the first match's coarse stage "
          "weighs its pairs by a Geman-McClure kernel at this fraction of the bound (0 = off: every pair weighs 1)");
-  flag(g, "--moving-point-to-point", map.moving_point_to_point,
-       "A moving sensor's matches (timed sweeps, or scans without odometry) keep the paper's point-to-point ICP "
-       "after their coarse stage (the default minimises the distances to each scan's own planes)");
+  flag(g, "--moving-point-to-plane", map.moving_point_to_plane,
+       "A moving sensor's matches (timed sweeps, or scans without odometry) minimise, after their coarse stage, the "
+       "distances to each scan's own planes (point-to-plane) instead of the paper's point-to-point distances");
   flag(g, "--wide-coarse-all-points", map.wide_coarse_all_points,
        "The first match at the adaptive bound runs its coarse stage on all the scan's points (the default: the "
        "health probe's; the fine stage matches all of them)");
@@ -336,7 +336,7 @@ void finish_settings(MapCommand& command) {
   if (options.no_recovery) settings.recovery.enabled = false;
   if (options.provisional_all_points) settings.motion.provisional_probe = false;
   if (options.wide_coarse_all_points) settings.motion.wide_coarse_probe = false;
-  if (options.moving_point_to_point) settings.motion.plane_objective = false;
+  if (options.moving_point_to_plane) settings.motion.plane_objective = true;
   if (options.no_loops) settings.loops.enabled = false;
   if (options.loop_edges_alike) settings.loops.information_from_geometry = false;
   if (!options.control.empty()) settings.control.keep_graph = true;

@@ -1,10 +1,11 @@
 #pragma once
 // Point-to-plane ICP's step (Chen and Medioni 1991; not in the paper), for a moving sensor's
-// matches (MotionSettings::plane_objective): where the paper's point-to-point step also pulls each
-// data point sideways along the surface it shares with its model point (towards that one sampled
-// point), the plane's distance alone is what a pair measures here, so the noise of a sparse local
-// map's sampling no longer moves the scan along its surfaces. The sums (search/plane_sums.hpp)
-// come from the backend; the 6x6 solve runs here, on the host.
+// matches where asked (MotionSettings::plane_objective, --moving-point-to-plane): where the
+// paper's point-to-point step also pulls each data point sideways along the surface it shares
+// with its model point (towards that one sampled point), the plane's distance alone is what a
+// pair measures here, so the sampling of a thinned local map no longer moves the scan along its
+// surfaces. The sums (search/plane_sums.hpp) come from the backend; the 6x6 solve runs here, on
+// the host.
 //
 // Units: centimetres and radians. Thread-safety: a pure function.
 #include <optional>

@@ -125,15 +125,16 @@ struct MotionSettings {
   /// sweeps (their deskew matches again; the simulated spinning loop no longer closed). Loop
   /// matches and stop-and-go surveys keep the paper's sums. 0: off.
   double wide_coarse_kernel_fraction = 0.6;
-  /// A moving sensor's matches minimise, after their coarse stage, the distances of the model's
-  /// points to the scan's own planes (point-to-plane, IcpObjective::kPointToPlane; its planes are
-  /// the health check's cells, MappingSettings::plane_cell_cm): the paper's point-to-point step
-  /// also pulls each point towards the one model point it is paired with along the surface they
-  /// share, and a local map thinned to one point per cell samples surfaces coarsely. On the real
-  /// hand-held sequences the step error fell on 11 of 12 runs (three voxel sizes), on the simulated
-  /// hand-held drives the mean error 2-4x (docs/benchmarks.md, "Point-to-plane for a moving
-  /// sensor"). Coarse stages, loop matches and stop-and-go surveys keep the paper's ICP. false: off.
-  bool plane_objective = true;
+  /// A moving sensor's matches (a timed sweep's, or a scan's that constant velocity places: no
+  /// odometry) minimise, after their coarse stage, the distances of the model's points to the
+  /// scan's own planes (point-to-plane, IcpObjective::kPointToPlane; its planes are the health
+  /// check's cells, MappingSettings::plane_cell_cm) instead of the paper's point-to-point distances.
+  /// Not the default: on the simulated hand-held drives (timed sweeps) the mean error falls 1.5-2.2x
+  /// and on the real hand-held keyframes the step error on 10 of 12 runs, but there it took more
+  /// time (1.05-1.15x) and 3 of the 12 runs ended doubtful where point-to-point ended none
+  /// (docs/benchmarks.md, "Point-to-plane for a moving sensor"). Coarse stages, loop matches and
+  /// stop-and-go surveys with odometry keep the paper's ICP either way.
+  bool plane_objective = false;
   /// A moving sensor's metascan (a timed sweep's, or a scan's that constant velocity places: no
   /// odometry) keeps at most one model point in each cell of this size (the nearest scan's): its
   /// scans overlap tens of times, and a tree over all their points costs more to build than the

@@ -36,8 +36,7 @@ struct Prediction {
   /// What its matches minimise. The robust kernel of the first match's coarse stage:
   /// MotionSettings::wide_coarse_kernel_fraction for a keyframe without times whose bound was
   /// learned from trusted matches (a start as near as the recent ones were); 0 (the paper's sums)
-  /// before there are any, and for timed sweeps. The fine objective: point-to-plane for a moving
-  /// sensor (MotionSettings::plane_objective), the paper's point-to-point for stop-and-go scans.
+  /// before there are any, and for timed sweeps. The fine objective: fine_objective().
   MatchObjectives objectives;
 };
 
@@ -65,8 +64,8 @@ class MotionPrediction {
   /// odometry). Stop-and-go surveys keep the paper's matching.
   bool moving(const SurveyState& state, std::size_t i) const;
   /// What scan i's matches minimise after their coarse stage (MatchObjectives::fine), whatever
-  /// their start: point-to-plane for a moving sensor's scan (MotionSettings::plane_objective),
-  /// the paper's point-to-point otherwise. The one place that chooses it.
+  /// their start: point-to-plane for a moving sensor's scan where MotionSettings::plane_objective
+  /// asks for it, the paper's point-to-point otherwise. The one place that chooses it.
   IcpObjective fine_objective(const SurveyState& state, std::size_t i) const;
   /// The sensor's motion over scan j's sweep (start to end, its own file frame, cm) if it stood at
   /// T_world_points `pose_j` and scan `other` (j-1 or j+1) where the state holds it: the step

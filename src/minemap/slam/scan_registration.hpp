@@ -61,8 +61,9 @@ struct MatchObjectives {
   /// weigh every far pair down and hold the scan where it is.
   float coarse_kernel_fraction = 0.0f;
   /// The objective of every fine stage and of every match at the pair bound (retries' too; coarse
-  /// stages stay point-to-point): point-to-plane on the scan's own planes (PreparedScan::planes;
-  /// point-to-point where it has none) for a moving sensor (MotionSettings::plane_objective).
+  /// stages stay point-to-point): the paper's point-to-point, or point-to-plane on the scan's own
+  /// planes (PreparedScan::planes; point-to-point where it has none) for a moving sensor where
+  /// MotionSettings::plane_objective asks for it.
   IcpObjective fine = IcpObjective::kPointToPoint;
 };
 
