@@ -129,10 +129,10 @@ struct MotionSettings {
   /// odometry) minimise, after their coarse stage, the distances of the model's points to the
   /// scan's own planes (point-to-plane, IcpObjective::kPointToPlane; its planes are the health
   /// check's cells, MappingSettings::plane_cell_cm) instead of the paper's point-to-point distances.
-  /// Not the default: on the simulated hand-held drives (timed sweeps) the mean error falls 1.5-2.2x
-  /// and on the real hand-held keyframes the step error on 10 of 12 runs, but there it took more
-  /// time (1.05-1.15x) and 3 of the 12 runs ended doubtful where point-to-point ended none
-  /// (docs/benchmarks.md, "Point-to-plane for a moving sensor"). Coarse stages, loop matches and
+  /// Not the default: on the simulated hand-held drives (timed sweeps) the mean error falls 1.5-2.4x
+  /// and on the real keyframes the step error on 9 of 12 runs, but there it took 0.87-1.23x the
+  /// time and 3 of the 12 runs ended doubtful where point-to-point ended none (docs/benchmarks.md,
+  /// "Point-to-plane for a moving sensor"). Coarse stages, loop matches and
   /// stop-and-go surveys with odometry keep the paper's ICP either way.
   bool plane_objective = false;
   /// A moving sensor's metascan (a timed sweep's, or a scan's that constant velocity places: no
