@@ -85,6 +85,28 @@ NearestPair find_nearest(const Eigen::Vector3f& p, const std::vector<PlacedModel
   return result;
 }
 
+/// Pairs every data point in blocks of kQueriesPerBlock (TBB over blocks, so any thread count
+/// gives the same blocks) and hands each block's pairs, in index order, to `add(block, i, pair)`;
+/// `block` starts as `empty`. Returns one Block per block, in block order, for the caller to add.
+template <typename Block, typename Add>
+std::vector<Block> pair_in_blocks(std::span<const Eigen::Vector3f> points, const std::vector<PlacedModel>& placed,
+                                  SearchMethod method, float max_pair_dist_cm, const Block& empty, Add add) {
+  const float max_squared = max_pair_dist_cm * max_pair_dist_cm;
+  const std::size_t blocks = (points.size() + kQueriesPerBlock - 1) / kQueriesPerBlock;
+  std::vector<Block> partial(blocks, empty);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const tbb::blocked_range<std::size_t>& range) {
+    // Hints never change a result (detail::exact_nearest), so they may carry across blocks.
+    std::vector<std::int32_t> hints(placed.size(), -1);
+    for (std::size_t b = range.begin(); b != range.end(); ++b) {
+      const std::size_t end = std::min(points.size(), (b + 1) * kQueriesPerBlock);
+      for (std::size_t i = b * kQueriesPerBlock; i < end; ++i) {
+        add(partial[b], i, find_nearest(points[i], placed, method, max_squared, hints.data()));
+      }
+    }
+  });
+  return partial;
+}
+
 }  // namespace
 
 std::shared_ptr<const PreparedCloud> CpuBackend::prepare(std::vector<Eigen::Vector3f> points_cm,
@@ -104,22 +126,14 @@ std::vector<std::shared_ptr<const PreparedCloud>> CpuBackend::prepare_many(
 
 PairSums CpuBackend::pair_and_sum(const PreparedCloud& data, std::span<const ModelPlacement> models, SearchMethod method,
                                   const PairingSettings& settings) {
-  const auto placed = place_models(models, method);
   const auto points = data.points();
   const Eigen::Vector3d reference = data.centroid_cm();
-  const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
   const float scale_squared = settings.robust_scale_cm * settings.robust_scale_cm;
-  const std::size_t blocks = (points.size() + kQueriesPerBlock - 1) / kQueriesPerBlock;
-  std::vector<PairSums> partial(blocks);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const tbb::blocked_range<std::size_t>& range) {
-    // Hints never change a result (detail::exact_nearest), so they may carry across blocks.
-    std::vector<std::int32_t> hints(placed.size(), -1);
-    for (std::size_t b = range.begin(); b != range.end(); ++b) {
-      std::array<double, kSumTerms> terms{};  // one block's sums, as pair_sums_blocks makes them
-      const std::size_t end = std::min(points.size(), (b + 1) * kQueriesPerBlock);
-      for (std::size_t i = b * kQueriesPerBlock; i < end; ++i) {
-        const NearestPair pair = find_nearest(points[i], placed, method, max_squared, hints.data());
-        if (pair.squared_distance_cm2 < 0.0f) continue;
+  using Terms = std::array<double, kSumTerms>;  // one block's sums, as pair_sums_blocks makes them
+  const std::vector<Terms> partial = pair_in_blocks(
+      points, place_models(models, method), method, settings.max_pair_dist_cm, Terms{},
+      [&](Terms& terms, std::size_t i, const NearestPair& pair) {
+        if (pair.squared_distance_cm2 < 0.0f) return;
         const Eigen::Vector3f& p = points[i];
         const Eigen::Vector3f& m = pair.position_cm;
         const double pc[3] = {static_cast<double>(p.x()) - reference.x(), static_cast<double>(p.y()) - reference.y(),
@@ -128,13 +142,10 @@ PairSums CpuBackend::pair_and_sum(const PreparedCloud& data, std::span<const Mod
                               static_cast<double>(m.z()) - reference.z()};
         shared::mm_add_point_to_point_terms(terms.data(), pc, mc, pair.squared_distance_cm2,
                                             shared::mm_robust_weight(pair.squared_distance_cm2, scale_squared));
-      }
-      partial[b] = PairSums::from_terms(terms.data(), reference);
-    }
-  });
+      });
   PairSums total;
   total.reference_cm = reference;
-  for (const auto& s : partial) total += s;
+  for (const Terms& terms : partial) total += PairSums::from_terms(terms.data(), reference);
   return total;
 }
 
@@ -145,25 +156,15 @@ PlaneSums CpuBackend::pair_and_plane_sum(const PreparedCloud& data, std::span<co
   if (data_normals.size() != points.size()) {
     throw std::invalid_argument("point-to-plane sums: one normal per data point expected");
   }
-  const auto placed = place_models(models, method);
-  const Eigen::Vector3d reference = data.centroid_cm();
-  const float max_squared = settings.max_pair_dist_cm * settings.max_pair_dist_cm;
-  const std::size_t blocks = (points.size() + kQueriesPerBlock - 1) / kQueriesPerBlock;
-  std::vector<PlaneSums> partial(blocks);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::int32_t> hints(placed.size(), -1);
-    for (std::size_t b = range.begin(); b != range.end(); ++b) {
-      PlaneSums& sums = partial[b];  // one block's sums, as plane_sums makes them
-      sums.reference_cm = reference;
-      const std::size_t end = std::min(points.size(), (b + 1) * kQueriesPerBlock);
-      for (std::size_t i = b * kQueriesPerBlock; i < end; ++i) {
-        sums.add(points[i], data_normals[i], find_nearest(points[i], placed, method, max_squared, hints.data()));
-      }
-    }
-  });
   PlaneSums total;
-  total.reference_cm = reference;
-  for (const auto& s : partial) total += s;
+  total.reference_cm = data.centroid_cm();
+  // One block's sums as plane_sums makes them, added as they are found.
+  const std::vector<PlaneSums> partial =
+      pair_in_blocks(points, place_models(models, method), method, settings.max_pair_dist_cm, total,
+                     [&](PlaneSums& sums, std::size_t i, const NearestPair& pair) {
+                       sums.add(points[i], data_normals[i], pair);
+                     });
+  for (const PlaneSums& sums : partial) total += sums;
   return total;
 }
 
