@@ -409,13 +409,18 @@ TEST(MovingMapping, KeyframesRunTheirWideCoarseStageOnTheProbeAtTheSameAccuracy)
   EXPECT_EQ(full.doubtful, 0u);
 }
 
-/// The simulated hand-held sweeps as keyframes: no times, no odometry (seed 3, 30 sweeps).
-sim::MovingSurvey handheld_keyframes() {
+/// Simulated hand-held sweeps with their points' times, no odometry (seed 3, 30 sweeps).
+sim::MovingSurvey handheld_sweeps() {
   sim::MovingSimulationSettings simulation;
   simulation.sensor = sim::MovingSensor::kHandheld;
   simulation.sweeps = 30;
   simulation.mine.seed = 3;
-  sim::MovingSurvey keyframes = sim::simulate_moving_survey(simulation);
+  return sim::simulate_moving_survey(simulation);
+}
+
+/// The same sweeps as keyframes: no times, no odometry.
+sim::MovingSurvey handheld_keyframes() {
+  sim::MovingSurvey keyframes = handheld_sweeps();
   for (Scan& scan : keyframes.scans) scan.attributes.time_s.clear();
   return keyframes;
 }
@@ -486,15 +491,10 @@ TEST(MovingMapping, KeyframesWeighTheirWideCoarseStageAndStopAndGoKeepsThePapers
 // keeps the paper's ICP, its poses not depending on the setting at all. The figures on longer
 // simulated and real sequences are in docs/benchmarks.md ("Point-to-plane for a moving sensor").
 TEST(MovingMapping, AMovingSensorsMatchesMayMinimiseTheDistancesToItsPlanesAndStopAndGoKeepsThePapers) {
-  sim::MovingSimulationSettings simulation;
-  simulation.sensor = sim::MovingSensor::kHandheld;
-  simulation.sweeps = 30;
-  simulation.mine.seed = 3;
-  const sim::MovingSurvey sweeps = sim::simulate_moving_survey(simulation);
   MappingSettings planar;
   planar.motion.plane_objective = true;
   for (const bool timed : {true, false}) {
-    const sim::MovingSurvey survey = timed ? sweeps : handheld_keyframes();
+    const sim::MovingSurvey survey = timed ? handheld_sweeps() : handheld_keyframes();
     const MovingRun planes = map_moving(survey, planar);
     const MovingRun paper = map_moving(survey, MappingSettings{});
     std::printf("%s: planes %.2f cm mean (%.2f a step), point-to-point %.2f cm (%.2f)\n", timed ? "sweeps" : "keyframes",
