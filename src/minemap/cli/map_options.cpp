@@ -208,6 +208,9 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
          "Constant velocity: a match pinned along its weakest direction less than this fraction of its best, and "
          "moved along it more than the pair bound, is matched again from the prediction along it; that match is "
          "kept when trusted, nearer the prediction and a clearly closer fit (0 = off)");
+  number(g, "--weak-step-constraint", mapping.motion.weak_step_constraint,
+         "Timed sweeps: where the last match pinned a direction less than this fraction of its best, the next "
+         "start moves along it as the recent well-pinned steps did, not as the last step did (0 = off)");
   number(g, "--metascan-margin-cm", mapping.metascan_margin_cm,
          "Metascan: model points within the scan's box grown by the pair bound and this");
   number(g, "--local-map-cell-cm", mapping.motion.local_map_cell_cm,

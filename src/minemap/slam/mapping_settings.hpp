@@ -165,6 +165,17 @@ struct MotionSettings {
   /// ...and kept only where its pairs' RMS distance is below this times the first match's: a clearly
   /// closer fit, not one within the noise of two fits alike.
   double slide_rms_factor = 0.95;
+  /// A timed sweep's constant-velocity prediction does not repeat the last step along the
+  /// direction the last match pinned weakly (RegistrationHealth::translation_constraint below this,
+  /// along its weakest_direction): there it takes the mean of the recent steps that were pinned at
+  /// least this well (the last weak_step_window, time-scaled; at least 3 of them), the rest of the
+  /// step and its turn kept. Where a match cannot see a direction its start stays, so repeating a
+  /// step that was off along it repeats the error every sweep: in the simulated hand-held loops the
+  /// drift ran 30-50 cm a sweep sideways for dozens of sweeps (docs/benchmarks.md, "Moving LiDAR").
+  /// Not for keyframes without times: on the real hand-held keyframes (0.5 s apart, their
+  /// predictions 30-60 cm off anyway) it helped nothing and ended 2 of 12 runs doubtful. 0: off.
+  double weak_step_constraint = 0.1;
+  int weak_step_window = 20;  ///< ...over the trusted steps into the last this many scans
   void validate() const;
   bool operator==(const MotionSettings&) const = default;
 };

@@ -52,7 +52,11 @@ Prediction MotionPrediction::predict(const SurveyState& state, std::size_t i) co
   const Pose previous = file_pose(state, i - 1, state.pose(i - 1));
   Pose step = Pose::Identity();
   if (i >= 2 && state.registered(i - 1) && state.registered(i - 2)) {
-    step = rigid_inverse(file_pose(state, i - 2, state.pose(i - 2))) * previous;
+    if (const std::optional<Pose> measured = step_along_weak_direction(state, i)) {
+      step = rigid_inverse(state.points_from_file(i - 2)) * *measured * state.points_from_file(i - 1);
+    } else {
+      step = rigid_inverse(file_pose(state, i - 2, state.pose(i - 2))) * previous;
+    }
     step = motion_fraction(step, time_ratio(state, i - 1, i, i - 2, i - 1, 1.0));
   }
   prediction.start = previous * step * rigid_inverse(state.points_from_file(i));
@@ -64,6 +68,39 @@ Prediction MotionPrediction::predict(const SurveyState& state, std::size_t i) co
     prediction.objectives.coarse_kernel_fraction = static_cast<float>(settings_.motion.wide_coarse_kernel_fraction);
   }
   return prediction;
+}
+
+std::optional<Pose> MotionPrediction::step_along_weak_direction(const SurveyState& state, std::size_t i) const {
+  const MotionSettings& motion = settings_.motion;
+  const RegistrationHealth& last = state.health(i - 1);
+  const double least = motion.weak_step_constraint;
+  if (!(least > 0.0) || !(state.prepared(i).sweep_s > 0.0) || !last.judged || last.doubtful() ||
+      !(last.translation_constraint >= 0.0 && last.translation_constraint < least) ||
+      !(last.weakest_direction.squaredNorm() > 0.5)) {
+    return std::nullopt;
+  }
+  // The steps into the last weak_step_window scans that were pinned well along every direction,
+  // each scaled to the last step's time (the sweeps' stamps), along the weak direction of scan i-1
+  // (its data frame; a step's own frame turns little in a few sweeps).
+  const Eigen::Vector3d& weak = last.weakest_direction;
+  const std::size_t window = static_cast<std::size_t>(motion.weak_step_window);
+  double sum_cm = 0.0;
+  int count = 0;
+  for (std::size_t k = i - 1; k >= 1 && k + window >= i; --k) {
+    const RegistrationHealth& health = state.health(k);
+    if (!state.registered(k) || !state.registered(k - 1) || !health.judged || health.doubtful() ||
+        !(health.translation_constraint >= least)) {
+      continue;
+    }
+    const Pose step = rigid_inverse(state.pose(k - 1)) * state.pose(k);
+    sum_cm += step.block<3, 1>(0, 3).dot(weak) * time_ratio(state, i - 2, i - 1, k - 1, k, 1.0);
+    ++count;
+  }
+  if (count < 3) return std::nullopt;
+  Pose step = rigid_inverse(state.pose(i - 2)) * state.pose(i - 1);
+  const double along_cm = step.block<3, 1>(0, 3).dot(weak);
+  step.block<3, 1>(0, 3) += (sum_cm / count - along_cm) * weak;
+  return step;
 }
 
 PredictionError MotionPrediction::recent_error(const SurveyState& state, std::size_t i) const {

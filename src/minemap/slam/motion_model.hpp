@@ -6,11 +6,14 @@
 // pose moved by the previous registered step again (constant velocity, as KISS-ICP), scaled by the
 // sweeps' times where the files carry them; its first match then looks as wide as recent
 // predictions were off (KISS-ICP's adaptive threshold), so a fast hand-held sweep and a slow robot
-// both start within reach. The same constant velocity over one sweep is what the deskew undoes
-// (filter/deskew.hpp).
+// both start within reach. Along a direction the last timed sweep's match could not pin, the
+// last step is not repeated (it would repeat its error): the recent well-pinned steps' mean move
+// along it is (MotionSettings::weak_step_constraint). The same constant velocity over one sweep is
+// what the deskew undoes (filter/deskew.hpp).
 //
 // Reads the state, writes nothing. Thread-safety: const, one thread at a time with the state.
 #include <cstddef>
+#include <optional>
 
 #include "minemap/core/pose.hpp"
 #include "minemap/slam/mapping_settings.hpp"
@@ -83,6 +86,11 @@ class MotionPrediction {
   /// The adaptive bound for scan i: adaptive_bound_sigmas x the RMS displacement of the trusted
   /// constant-velocity predictions among the last window scans; 0 without any.
   float adaptive_bound_cm(const SurveyState& state, std::size_t i) const;
+  /// The step from scan i-2 to i-1 (T_points(i-2)_points(i-1)) that constant velocity repeats for
+  /// timed sweep i, its move along the direction scan i-1's match pinned weakly replaced by the
+  /// recent well-pinned steps' mean (MotionSettings::weak_step_constraint); nothing where that does
+  /// not apply.
+  std::optional<Pose> step_along_weak_direction(const SurveyState& state, std::size_t i) const;
 
   const MappingSettings& settings_;
 };
