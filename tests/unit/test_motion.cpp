@@ -554,7 +554,7 @@ TEST(MovingMapping, ASlidMatchStartsAgainWithOnlyItsMoveAlongTheWeakDirectionTak
 
 // Where a timed sweep's match pinned a direction weakly, repeating its step repeats whatever error
 // it made along it (the match cannot see it, so it stays where it starts): the simulated hand-held
-// loops drifted 30-50 cm a sweep sideways for dozens of sweeps. The prediction then takes the recent
+// loops drifted 26-53 cm a sweep sideways for 7-14 sweeps in a row. The prediction then takes the recent
 // well-pinned steps' mean move along that direction, scaled to the last step's time, and keeps the
 // rest of the last step and its turn; everywhere else it is the last step, as KISS-ICP's.
 TEST(MovingMapping, ATimedSweepsPredictionTakesTheWellPinnedStepsMoveAlongItsLastMatchsWeakDirection) {

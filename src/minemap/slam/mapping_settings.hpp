@@ -171,7 +171,7 @@ struct MotionSettings {
   /// least this well (the last weak_step_window, time-scaled; at least 3 of them), the rest of the
   /// step and its turn kept. Where a match cannot see a direction its start stays, so repeating a
   /// step that was off along it repeats the error every sweep: in the simulated hand-held loops the
-  /// drift ran 30-50 cm a sweep sideways for dozens of sweeps (docs/benchmarks.md, "Moving LiDAR").
+  /// drift ran 26-53 cm a sweep sideways for 7-14 sweeps in a row (docs/benchmarks.md, "Moving LiDAR").
   /// Not for keyframes without times: on the real hand-held keyframes (0.5 s apart, their
   /// predictions 30-60 cm off anyway) it helped nothing and ended 2 of 12 runs doubtful. 0: off.
   double weak_step_constraint = 0.1;

@@ -52,6 +52,9 @@ Prediction MotionPrediction::predict(const SurveyState& state, std::size_t i) co
   const Pose previous = file_pose(state, i - 1, state.pose(i - 1));
   Pose step = Pose::Identity();
   if (i >= 2 && state.registered(i - 1) && state.registered(i - 2)) {
+    // The plain step keeps its own expression, so every prediction the rule leaves alone keeps
+    // its bits; the adjusted one is found between the scans' points frames and turned into the
+    // files' frames here.
     if (const std::optional<Pose> measured = step_along_weak_direction(state, i)) {
       step = rigid_inverse(state.points_from_file(i - 2)) * *measured * state.points_from_file(i - 1);
     } else {
