@@ -637,6 +637,126 @@ TEST(MovingMapping, ATimedSweepsPredictionTakesTheWellPinnedStepsMoveAlongItsLas
 // within 1 %: the weave really went there): none is kept, and the run is the one with the test off,
 // bit for bit (the metascan made for the second match is not kept either). Where the second match
 // fits clearly closer (the real hand-held walks in docs/benchmarks.md, "Moving LiDAR") it is kept.
+// MotionPrediction::unpinned_turn against sums by hand. Sweeps 0-12, 0.1 s apart, each step
+// turning 4 deg about x one way and then the other (a sensor turned back and forth) and 5 cm
+// forward; each match pinned its turn about x at 0.05 of its best axis (the axis given either way
+// round: an eigenvector's sign means nothing).
+TEST(MovingMapping, AnUnpinnedTurnSumsTheRecentWeaklyPinnedSweepsTurnsAboutTheirWeakAxes) {
+  CpuBackend cpu;
+  struct Case {
+    double sweep_s = 0.1;                              // timed sweeps; 0: keyframes without times
+    std::size_t pinned = 0;                            // > 0: this scan's match pinned every turn well
+    double limit_deg = MotionSettings{}.max_unpinned_turn_deg;
+    double window_s = MotionSettings{}.unpinned_turn_window_s;
+  };
+  const auto step_deg = [](std::size_t k) { return k % 2 == 0 ? 4.0 : -4.0; };
+  const auto turn = [&](const Case& c) {
+    MappingSettings settings;
+    settings.motion.max_unpinned_turn_deg = c.limit_deg;
+    settings.motion.unpinned_turn_window_s = c.window_s;
+    detail::SurveyState state;
+    Pose pose = Pose::Identity();
+    for (std::size_t i = 0; i <= 12; ++i) {
+      Scan scan;
+      scan.name = "sweep" + std::to_string(i);
+      detail::PreparedScan prepared;
+      prepared.cloud = cpu.prepare(test::random_cloud(40, -500.f, 500.f, 70 + std::uint32_t(i)), settings.tree);
+      prepared.model_cloud = prepared.probe = prepared.cloud;
+      prepared.sweep_s = c.sweep_s;
+      prepared.stamp_s = c.sweep_s > 0.0 ? 0.1 * double(i) : std::nan("");
+      state.add(scan, std::move(prepared));
+      if (i > 0) {
+        Pose step = Pose::Identity();
+        step.block<3, 3>(0, 0) =
+            Eigen::AngleAxisd(step_deg(i) * M_PI / 180.0, Eigen::Vector3d::UnitX()).toRotationMatrix();
+        step(0, 3) = 5.0;
+        pose = pose * step;
+      }
+      state.place(i, pose);
+      RegistrationHealth health;
+      health.judged = i > 0;
+      health.rotation_constraint = i == c.pinned ? 0.3 : 0.05;
+      health.weakest_axis = i % 3 == 0 ? Eigen::Vector3d(-1.0, 0.0, 0.0) : Eigen::Vector3d(1.0, 0.0, 0.0);
+      state.judged(i, health);
+    }
+    return detail::MotionPrediction(settings).unpinned_turn(state, 12);
+  };
+  // The last second: the steps into sweeps 3-12, 4 deg each whatever its sense.
+  const std::optional<detail::UnpinnedTurn> all = turn(Case{});
+  ASSERT_TRUE(all.has_value());
+  EXPECT_NEAR(all->deg, 40.0, 1e-9);
+  EXPECT_EQ(all->sweeps, 10);
+  EXPECT_NEAR(all->seconds, 1.0, 1e-12);
+  EXPECT_NEAR(all->constraint, 0.05, 1e-12);
+  EXPECT_NEAR(turn(Case{.window_s = 0.5})->deg, 20.0, 1e-9);
+  // A match that pinned its turns ends the run: the steps into sweeps 9-12.
+  EXPECT_NEAR(turn(Case{.pinned = 8})->deg, 16.0, 1e-9);
+  EXPECT_EQ(turn(Case{.pinned = 8})->sweeps, 4);
+  // None where sweep 12 pinned its own turns, where the scans carry no times, or with the test off.
+  EXPECT_FALSE(turn(Case{.pinned = 12}).has_value());
+  EXPECT_FALSE(turn(Case{.sweep_s = 0.0}).has_value());
+  EXPECT_FALSE(turn(Case{.limit_deg = 0.0}).has_value());
+  MappingSettings bad;
+  for (const double limit : {-1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    bad.motion.max_unpinned_turn_deg = limit;
+    EXPECT_THROW(bad.validate(), std::invalid_argument) << limit;
+  }
+  bad = MappingSettings{};
+  for (const double window : {0.0, -1.0, std::nan("")}) {
+    bad.motion.unpinned_turn_window_s = window;
+    EXPECT_THROW(bad.validate(), std::invalid_argument) << window;
+  }
+  bad = MappingSettings{};
+  for (const double fraction : {-0.1, 1.5, std::nan("")}) {
+    bad.motion.unpinned_turn_constraint = fraction;
+    EXPECT_THROW(bad.validate(), std::invalid_argument) << fraction;
+  }
+}
+
+// The simulated hand-held rosette scanner standing still in a drive: its surfaces hardly pin a turn
+// about its view axis (0.03-0.05 of the best axis), and its pattern turns 6 deg from one sweep to
+// the next; the matches follow the pattern and turn the sensor back and forth, 8-20 deg a sweep.
+// With the test off that map comes out trusted; with it, the sweeps are named. Walking at 1.4 m/s
+// (the sway turns the sensor about that axis too, 8-9 deg a second) no sweep is doubtful for it.
+TEST(MovingMapping, AStandingRosetteTurnedByItsPatternIsDoubtfulAWalkIsNot) {
+  sim::MovingSimulationSettings standing;
+  standing.sensor = sim::MovingSensor::kHandheld;
+  standing.speed_mps = 0.0;
+  standing.sweeps = 30;
+  standing.mine.seed = 4;
+  const sim::MovingSurvey still = sim::simulate_moving_survey(standing);
+  CpuBackend cpu;
+  const auto unpinned = [](const MappingResult& result) {
+    std::size_t n = 0;
+    for (const std::size_t k : result.doubtful()) {
+      if (result.scans[k].health.failed != HealthTest::kUnpinnedTurn) continue;
+      EXPECT_NE(result.scans[k].health.doubt.find("hardly pin"), std::string::npos);
+      ++n;
+    }
+    return n;
+  };
+  MappingSettings off;
+  off.motion.max_unpinned_turn_deg = 0.0;
+  const MappingResult trusted = map_survey(still.scans, off, cpu);
+  ASSERT_TRUE(trusted.all_registered());
+  double worst_deg = 0.0;  // the case: the sensor stood still, and its map turned
+  for (const ScanOutcome& scan : trusted.scans) {
+    worst_deg = std::max(worst_deg, rotation_angle_deg(rigid_inverse(trusted.scans[0].pose_cm) * scan.pose_cm));
+  }
+  std::printf("standing still: turned up to %.1f deg; doubtful with the test off %zu\n", worst_deg,
+              trusted.doubtful().size());
+  ASSERT_GT(worst_deg, 10.0);
+  EXPECT_EQ(unpinned(trusted), 0u);
+  const MappingResult named = map_survey(still.scans, MappingSettings{}, cpu);
+  EXPECT_GT(unpinned(named), still.scans.size() / 2);
+
+  sim::MovingSimulationSettings walking = standing;
+  walking.speed_mps.reset();
+  walking.sweeps = 60;
+  const MappingResult walked = map_survey(sim::simulate_moving_survey(walking).scans, MappingSettings{}, cpu);
+  EXPECT_EQ(unpinned(walked), 0u);
+}
+
 TEST(MovingMapping, ASecondMatchFromThePredictionThatFitsNoCloserChangesNothing) {
   sim::MovingSimulationSettings simulation;
   simulation.sensor = sim::MovingSensor::kHandheld;

@@ -49,6 +49,9 @@ json health_json(const RegistrationHealth& h) {
           {"rms_cm", h.rms_cm}, {"correction_cm", h.correction_cm}, {"correction_deg", h.correction_deg},
           {"moved_cm", h.moved_cm}, {"translation_constraint", h.translation_constraint},
           {"weakest_direction", {h.weakest_direction.x(), h.weakest_direction.y(), h.weakest_direction.z()}},
+          {"rotation_constraint", h.rotation_constraint},
+          {"weakest_axis", {h.weakest_axis.x(), h.weakest_axis.y(), h.weakest_axis.z()}},
+          {"failed", static_cast<int>(h.failed)},
           {"pair_bound_cm", h.pair_bound_cm}, {"retry_bound_cm", h.retry_bound_cm}, {"doubt", h.doubt},
           {"out_of_reach", h.out_of_reach}, {"after_loop_closure", h.after_loop_closure}};
 }
@@ -67,6 +70,14 @@ RegistrationHealth health_of(const json& j) {
   const auto w = j.at("weakest_direction").get<std::vector<double>>();
   if (w.size() != 3) throw std::invalid_argument("weakest_direction is not 3 numbers");
   h.weakest_direction = Eigen::Vector3d(w[0], w[1], w[2]);
+  // Written since the rotation constraint (a watch saved before reads as not measured).
+  h.rotation_constraint = j.value("rotation_constraint", -1.0);
+  const auto a = j.value("weakest_axis", std::vector<double>{0.0, 0.0, 0.0});
+  if (a.size() != 3) throw std::invalid_argument("weakest_axis is not 3 numbers");
+  h.weakest_axis = Eigen::Vector3d(a[0], a[1], a[2]);
+  const int failed = j.value("failed", 0);
+  if (failed < 0 || failed > static_cast<int>(HealthTest::kUnpinnedTurn)) throw std::invalid_argument("unknown health test");
+  h.failed = static_cast<HealthTest>(failed);
   h.pair_bound_cm = j.at("pair_bound_cm");
   h.retry_bound_cm = j.at("retry_bound_cm");
   h.doubt = j.at("doubt");

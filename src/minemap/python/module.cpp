@@ -522,6 +522,7 @@ py::dict register_api(const py::handle& source, const py::handle& target, const 
   health["moved"] = h.moved_cm * per_cm;
   health["pair_bound"] = double(h.pair_bound_cm) * per_cm;
   health["translation_constraint"] = h.translation_constraint;
+  health["rotation_constraint"] = h.rotation_constraint;
   d["health"] = health;
   return d;
 }

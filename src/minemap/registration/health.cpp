@@ -71,6 +71,7 @@ RegistrationHealth judge_registration(ComputeBackend& backend, const PreparedClo
   if (data_planes != nullptr) {
     const Matrix6d information = point_to_plane_information(paired_points, *data_planes);
     health.translation_constraint = translation_constraint_ratio(information, &health.weakest_direction);
+    health.rotation_constraint = rotation_constraint_ratio(information, &health.weakest_axis);
   }
   char text[240];
   const float reach = reach_bound_cm > 0.0f ? reach_bound_cm : bound;

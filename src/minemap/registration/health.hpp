@@ -54,7 +54,9 @@ struct HealthSettings {
 };
 
 /// Which test a doubtful match failed (the first, in the order below).
-enum class HealthTest { kNone, kReach, kPaired, kBeyondBound, kEdge, kConstraint };
+/// kUnpinnedTurn: not one match's test but the motion's (slam/survey_matcher.cpp,
+/// doubt_unpinned_turn), kept when the scans are judged again after the loops.
+enum class HealthTest { kNone, kReach, kPaired, kBeyondBound, kEdge, kConstraint, kUnpinnedTurn };
 
 /// The figures of one judged match, and the verdict.
 struct RegistrationHealth {
@@ -70,6 +72,12 @@ struct RegistrationHealth {
   /// Weakest over strongest translation information of the pairs (< 0: not measured, no planes given).
   double translation_constraint = -1.0;
   Eigen::Vector3d weakest_direction = Eigen::Vector3d::Zero();  ///< in the data frame (unit; 0: not measured)
+  /// Weakest over strongest rotation information (turns about the data frame's origin; < 0: not
+  /// measured), and the axis of the weakest, in the data frame (unit). Not a test of the match
+  /// alone: a turn the surfaces cannot pin is judged over the recent sweeps
+  /// (MotionSettings::max_unpinned_turn_deg).
+  double rotation_constraint = -1.0;
+  Eigen::Vector3d weakest_axis = Eigen::Vector3d::Zero();
   float pair_bound_cm = 0.0f;      ///< the bound it was judged at (the match's own)
   float retry_bound_cm = 0.0f;     ///< > 0: trusted after a retry that started at this wider bound
   /// > 0: the match from the motion model's start was not trusted; this one started where a

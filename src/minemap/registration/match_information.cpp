@@ -63,6 +63,13 @@ Matrix6d point_to_plane_information(std::span<const Eigen::Vector3f> points_cm, 
   return counted > 0 ? Matrix6d(information / static_cast<double>(counted)) : information;
 }
 
+double rotation_constraint_ratio(const Matrix6d& information, Eigen::Vector3d* weakest) {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(information.bottomRightCorner<3, 3>());
+  const Eigen::Vector3d values = eigen.eigenvalues();
+  if (weakest != nullptr) *weakest = eigen.eigenvectors().col(0);
+  return values[2] > 0.0 ? std::max(0.0, values[0]) / values[2] : 0.0;
+}
+
 double translation_constraint_ratio(const Matrix6d& information, Eigen::Vector3d* weakest) {
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(information.topLeftCorner<3, 3>());
   const Eigen::Vector3d values = eigen.eigenvalues();

@@ -147,6 +147,7 @@ std::string map_report(const MappingResult& result, const std::optional<TruthCom
                                 {"recovery_inliers", h.recovered_inliers},
                                 {"note", h.note},
                                 {"translation_constraint", h.translation_constraint},
+                                {"rotation_constraint", h.rotation_constraint},
                                 {"judged_after_loop_closure", h.after_loop_closure}};
     }
   }

@@ -185,7 +185,9 @@ void LoopClosing::judge_again(SurveyState& state, const RunControl& control) con
   for (std::size_t k = 1; k < state.size() && !control.stop_requested(); ++k) {
     control.report(k + 1, "judging");
     const RegistrationHealth& old = state.health(k);
-    if (!state.registered(k) || !old.judged || old.out_of_reach) continue;
+    // A doubt about how the match got there (out of reach) or about the motion (a turn the
+    // surfaces could not pin) is not cleared by a fit where the relaxation left the scan.
+    if (!state.registered(k) || !old.judged || old.out_of_reach || old.failed == HealthTest::kUnpinnedTurn) continue;
     const Pose& pose = state.pose(k);
     std::vector<WorldModel> models = clouds.models(state, local_map_.judging_scans(state, k, pose), k);
     if (models.empty()) models.push_back({nothing.get(), pose});  // judged, and nothing pairs

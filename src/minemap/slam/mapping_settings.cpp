@@ -157,6 +157,15 @@ void MotionSettings::validate() const {
     throw std::invalid_argument("the weak step's constraint must be a fraction in [0, 1] (0 = off)");
   }
   if (weak_step_window < 1) throw std::invalid_argument("the weak step's window must be at least 1 scan");
+  if (!(max_unpinned_turn_deg >= 0.0) || !std::isfinite(max_unpinned_turn_deg)) {
+    throw std::invalid_argument("the unpinned turn's limit must be a finite number of degrees >= 0 (0 = off)");
+  }
+  if (!(unpinned_turn_window_s > 0.0) || !std::isfinite(unpinned_turn_window_s)) {
+    throw std::invalid_argument("the unpinned turn's window must be a finite number of seconds > 0");
+  }
+  if (!(unpinned_turn_constraint >= 0.0 && unpinned_turn_constraint <= 1.0)) {
+    throw std::invalid_argument("the unpinned turn's constraint must be a fraction in [0, 1]");
+  }
 }
 
 void ControlSettings::validate() const {

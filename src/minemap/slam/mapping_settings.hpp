@@ -176,6 +176,21 @@ struct MotionSettings {
   /// predictions 30-60 cm off anyway) it helped nothing and ended 2 of 12 runs doubtful. 0: off.
   double weak_step_constraint = 0.1;
   int weak_step_window = 20;  ///< ...over the trusted steps into the last this many scans
+  /// A timed sweep is doubtful when its match and those of the sweeps before it, each pinning its
+  /// weakest turn less than unpinned_turn_constraint of its best (RegistrationHealth::
+  /// rotation_constraint), turned the sensor by more than this in all (each sweep's turn counted
+  /// whatever its sense) about those axes within the last unpinned_turn_window_s. Surfaces that
+  /// cannot see a turn do not measure one, yet a scanner whose pattern turns from sweep to sweep (a
+  /// rosette's, 6 deg a sweep in the simulator) pulls its matches round with it: the simulated
+  /// hand-held sensor standing still was turned 8-20 deg a sweep back and forth (136 deg in a
+  /// second), walking at 0.5 m/s 7 deg a sweep for 12 sweeps (72), both with exit 0; walking at
+  /// 1.4 m/s its matches turn 9-13 deg a second about that axis, as its sway does (8-9)
+  /// (docs/benchmarks.md, "A turn the surfaces cannot pin"). 0: off.
+  double max_unpinned_turn_deg = 30.0;
+  double unpinned_turn_window_s = 1.0;
+  /// ...a spinning sensor pins every turn at 0.4-0.5 of its best, a forward-looking one in a
+  /// tunnel the turn about its view axis at 0.03-0.07.
+  double unpinned_turn_constraint = 0.1;
   void validate() const;
   bool operator==(const MotionSettings&) const = default;
 };

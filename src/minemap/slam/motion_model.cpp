@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
+
+#include <Eigen/Geometry>
 
 namespace minemap::detail {
 
@@ -104,6 +107,43 @@ std::optional<Pose> MotionPrediction::step_along_weak_direction(const SurveyStat
   const double along_cm = step.block<3, 1>(0, 3).dot(weak);
   step.block<3, 1>(0, 3) += (sum_cm / count - along_cm) * weak;
   return step;
+}
+
+namespace {
+
+/// The health measured a turn constraint below `least`, with its axis.
+bool turn_unpinned(const RegistrationHealth& health, double least) {
+  return health.judged && health.rotation_constraint >= 0.0 && health.rotation_constraint < least &&
+         health.weakest_axis.squaredNorm() > 0.5;
+}
+
+}  // namespace
+
+std::optional<UnpinnedTurn> MotionPrediction::unpinned_turn(const SurveyState& state, std::size_t i) const {
+  const MotionSettings& motion = settings_.motion;
+  const double least = motion.unpinned_turn_constraint;
+  if (!(motion.max_unpinned_turn_deg > 0.0) || i < 1 || !(state.prepared(i).sweep_s > 0.0) ||
+      !std::isfinite(state.prepared(i).stamp_s) || !state.registered(i) ||
+      !turn_unpinned(state.health(i), least)) {
+    return std::nullopt;
+  }
+  UnpinnedTurn turn;
+  turn.constraint = state.health(i).rotation_constraint;
+  turn.axis = state.health(i).weakest_axis;
+  const double stamp_s = state.prepared(i).stamp_s;
+  for (std::size_t k = i; k >= 1; --k) {
+    const double start_s = state.prepared(k - 1).stamp_s;
+    if (!state.registered(k) || !state.registered(k - 1) || !turn_unpinned(state.health(k), least) ||
+        !(stamp_s - start_s <= motion.unpinned_turn_window_s + 1e-9)) {
+      break;
+    }
+    const Eigen::AngleAxisd rotation(Eigen::Matrix3d(
+        (rigid_inverse(state.pose(k - 1)) * state.pose(k)).block<3, 3>(0, 0)));
+    turn.deg += std::abs(rotation.angle() * rotation.axis().dot(state.health(k).weakest_axis)) * (180.0 / std::numbers::pi);
+    ++turn.sweeps;
+    turn.seconds = stamp_s - start_s;
+  }
+  return turn;
 }
 
 PredictionError MotionPrediction::recent_error(const SurveyState& state, std::size_t i) const {

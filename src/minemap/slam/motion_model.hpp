@@ -43,6 +43,16 @@ struct Prediction {
   MatchObjectives objectives;
 };
 
+/// How far the recent timed sweeps' matches turned the sensor about axes their surfaces hardly pin
+/// (MotionSettings::max_unpinned_turn_deg).
+struct UnpinnedTurn {
+  double deg = 0.0;         ///< the steps' turns about each match's weakest axis, summed (each's size)
+  int sweeps = 0;           ///< how many steps
+  double seconds = 0.0;     ///< from the first step's start to scan i's stamp
+  double constraint = 0.0;  ///< scan i's rotation constraint
+  Eigen::Vector3d axis = Eigen::Vector3d::Zero();  ///< scan i's weakest axis, its data frame
+};
+
 class MotionPrediction {
  public:
   explicit MotionPrediction(const MappingSettings& settings) : settings_(settings) {}
@@ -75,6 +85,13 @@ class MotionPrediction {
   /// between them at constant velocity, scaled by the sweep's duration over the time between their
   /// stamps (sweeps back to back, a spinning sensor's, where their stamps are not known).
   Pose sweep_motion(const SurveyState& state, std::size_t j, const Pose& pose_j, std::size_t other) const;
+  /// The turn of the steps into scan i and the sweeps before it within unpinned_turn_window_s whose
+  /// matches each pinned their weakest turn less than unpinned_turn_constraint of the best, about
+  /// those axes; empty when scan i is no timed sweep, its own match pinned every turn, or the test
+  /// is off. Each step's rotation vector is projected on its scan's weakest axis (the axis of a
+  /// step's rotation is the same in both its scans' frames) and its size summed: a sensor standing
+  /// still had its matches turned back and forth, 8-20 deg a sweep, that a signed sum hides.
+  std::optional<UnpinnedTurn> unpinned_turn(const SurveyState& state, std::size_t i) const;
 
  private:
   /// T_world_file of scan i at T_world_points `world_from_points`.

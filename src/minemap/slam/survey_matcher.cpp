@@ -488,6 +488,24 @@ void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTim
   place(i, again, here.start);
 }
 
+void SurveyMatcher::doubt_unpinned_turn(std::size_t i) {
+  const std::optional<UnpinnedTurn> turn = motion_.unpinned_turn(state_, i);
+  const MotionSettings& motion = settings_.motion;
+  if (!turn || !(turn->deg > motion.max_unpinned_turn_deg) || state_.health(i).doubtful()) return;
+  RegistrationHealth health = state_.health(i);
+  char text[480];
+  std::snprintf(text, sizeof text,
+                "its match and those of the %d sweeps before it turned the sensor by %.0f deg in all in %.1f s about "
+                "axes their surfaces hardly pin (this one's (%.2f, %.2f, %.2f) in the scan's frame, %.3f times as well as the best "
+                "axis; each less than %g): more than %g deg that the surfaces did not measure. A scanner whose "
+                "pattern turns from sweep to sweep (a rosette's) turns its matches with it",
+                turn->sweeps - 1, turn->deg, turn->seconds, turn->axis.x(), turn->axis.y(), turn->axis.z(),
+                turn->constraint, motion.unpinned_turn_constraint, motion.max_unpinned_turn_deg);
+  health.doubt = text;
+  health.failed = HealthTest::kUnpinnedTurn;
+  state_.judged(i, std::move(health));
+}
+
 void SurveyMatcher::relax(std::size_t newest, int budget) {
   const Relaxation::Tally tally = relaxation_.relax(state_, newest, budget, control_);
   relaxation_matches_ += tally.matches;
@@ -510,6 +528,7 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
     prefer_prediction_along_slide(i, prediction, match, convergence);
     place(i, match, start);
     if (raw != nullptr && timing != nullptr) refine_deskew(i, *raw, *timing, convergence);
+    doubt_unpinned_turn(i);
   });
   if (settings_.mode == MatchingMode::kSimultaneous) {
     control_.timed(&StageTimes::relaxation_s, [&] {

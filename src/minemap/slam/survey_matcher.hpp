@@ -130,6 +130,10 @@ class SurveyMatcher {
   /// where that moved it (kept when no worse); a provisional match is matched again in any case.
   /// Scan 1 first deskews scan 0, by the same step.
   void refine_deskew(std::size_t i, const Scan& raw, const SweepTiming& timing, Convergence convergence);
+  /// A timed sweep registered and judged: doubtful when it and the sweeps before it turned more
+  /// than MotionSettings::max_unpinned_turn_deg about axes their surfaces hardly pin
+  /// (MotionPrediction::unpinned_turn). The match stays; the scan is named.
+  void doubt_unpinned_turn(std::size_t i);
   void relax(std::size_t newest, int budget);
 
   const MappingSettings& settings_;
