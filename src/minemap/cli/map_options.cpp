@@ -211,6 +211,9 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
   number(g, "--weak-step-constraint", mapping.motion.weak_step_constraint,
          "Timed sweeps: where the last match pinned a direction less than this fraction of its best, the next "
          "start moves along it as the recent well-pinned steps did, not as the last step did (0 = off)");
+  number(g, "--first-sweep-rematch", mapping.motion.first_sweep_rematch_scans,
+         "Timed sweeps: the first sweep is matched again against this many sweeps after it once they are in, and "
+         "they move together to where that puts them (0 = off)");
   number(g, "--max-unpinned-turn-deg", mapping.motion.max_unpinned_turn_deg,
          "Timed sweeps: doubtful when the matches of the last second turned the sensor more than this about axes "
          "their surfaces hardly pin (a rosette scanner's pattern turns them; 0 = off)");

@@ -163,6 +163,9 @@ void MotionSettings::validate() const {
   if (!(unpinned_turn_window_s > 0.0) || !std::isfinite(unpinned_turn_window_s)) {
     throw std::invalid_argument("the unpinned turn's window must be a finite number of seconds > 0");
   }
+  if (first_sweep_rematch_scans < 0) {
+    throw std::invalid_argument("the first sweep's second match comes after a number of sweeps >= 0 (0 = off)");
+  }
   if (!(unpinned_turn_constraint >= 0.0 && unpinned_turn_constraint <= 1.0)) {
     throw std::invalid_argument("the unpinned turn's constraint must be a fraction in [0, 1]");
   }

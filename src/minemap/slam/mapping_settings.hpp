@@ -191,6 +191,14 @@ struct MotionSettings {
   /// ...a spinning sensor pins every turn at 0.4-0.5 of its best, a forward-looking one in a
   /// tunnel the turn about its view axis at 0.03-0.07.
   double unpinned_turn_constraint = 0.1;
+  /// The first timed sweep, the survey's frame, is matched again once this many sweeps after it are
+  /// registered: against them all (its deskew again by the step into sweep 1 as it then stands),
+  /// and they are moved together, rigidly, to where that match puts them, the first sweep staying
+  /// where it stands. Its first place came from one match, sweep 1's against it alone, and every
+  /// later pose keeps that match's error as a turn of the whole map: on the simulated drives the
+  /// first steps were 0.2-4.6 deg off (docs/benchmarks.md, "The first sweep matched again").
+  /// 0: off.
+  int first_sweep_rematch_scans = 20;
   void validate() const;
   bool operator==(const MotionSettings&) const = default;
 };

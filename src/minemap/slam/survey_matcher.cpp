@@ -445,7 +445,7 @@ void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTim
     const SweepTiming first_timing = preparation_.timing_of(*first_sweep_);
     const Pose first_motion = motion_.sweep_motion(state_, 0, state_.pose(0), 1);
     state_.set_prepared(0, preparation_.prepare(*first_sweep_, control_, first_timing, first_motion));
-    first_sweep_.reset();
+    if (settings_.motion.first_sweep_rematch_scans <= 1) first_sweep_.reset();
     models_changed = true;
   }
   const Pose refined = motion_.sweep_motion(state_, i, state_.pose(i), i - 1);
@@ -506,6 +506,51 @@ void SurveyMatcher::doubt_unpinned_turn(std::size_t i) {
   state_.judged(i, std::move(health));
 }
 
+void SurveyMatcher::rematch_first_sweep(std::size_t i) {
+  const int after = settings_.motion.first_sweep_rematch_scans;
+  if (after <= 1 || i != static_cast<std::size_t>(after) || !first_sweep_) return;
+  const Scan first = std::move(*first_sweep_);
+  first_sweep_.reset();
+  std::vector<std::size_t> later;
+  for (std::size_t j = 1; j <= i; ++j) {
+    if (!state_.registered(j)) return;
+    later.push_back(j);
+  }
+  const SweepTiming timing = preparation_.timing_of(first);
+  // One tree over the later sweeps' model points, in scan 0's frame; they move together, so the
+  // tree moves with them (`shift`, applied to its frame) and is built once.
+  const Pose frame = state_.pose(0);
+  const std::shared_ptr<const PreparedCloud> union_cloud = local_map_.whole_union(state_, later, frame);
+  Pose shift = Pose::Identity();
+  int rounds = 0;
+  for (int round = 0; round < kFirstSweepRounds; ++round) {
+    const Pose motion = motion_.sweep_motion(state_, 0, state_.pose(0), 1);
+    PreparedScan prepared = preparation_.prepare(first, control_, timing, motion);
+    const std::vector<WorldModel> models{{union_cloud.get(), shift * frame}};
+    const ScanMatch match =
+        registration_.register_scan(prepared, state_.pose(0), [&](float, const Pose&) { return models; });
+    step1_iterations_ += match.iterations;
+    if (!match.ok() || match.health.doubtful()) break;
+    // Scan 0 was matched to where the later sweeps say it stands; they move so that it stays.
+    const Pose move = state_.pose(0) * rigid_inverse(match.kept().world_from_data);
+    for (const std::size_t j : later) state_.place(j, move * state_.pose(j));
+    state_.set_prepared(0, std::move(prepared));
+    shift = move * shift;
+    ++rounds;
+    if (translation_norm(move) < settings_.motion.refine_min_change_cm &&
+        rotation_angle_deg(move) < settings_.motion.refine_min_change_deg) {
+      break;
+    }
+  }
+  if (rounds == 0) return;
+  char text[300];
+  std::snprintf(text, sizeof text,
+                "the first sweep (%s) was matched again against the %zu sweeps after it once they were in (%d "
+                "round(s)); they moved together %.1f cm and turned %.2f deg about it",
+                first.name.c_str(), i, rounds, translation_norm(shift), rotation_angle_deg(shift));
+  notes_.emplace_back(text);
+}
+
 void SurveyMatcher::relax(std::size_t newest, int budget) {
   const Relaxation::Tally tally = relaxation_.relax(state_, newest, budget, control_);
   relaxation_matches_ += tally.matches;
@@ -529,6 +574,7 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
     place(i, match, start);
     if (raw != nullptr && timing != nullptr) refine_deskew(i, *raw, *timing, convergence);
     doubt_unpinned_turn(i);
+    if (raw != nullptr) rematch_first_sweep(i);
   });
   if (settings_.mode == MatchingMode::kSimultaneous) {
     control_.timed(&StageTimes::relaxation_s, [&] {

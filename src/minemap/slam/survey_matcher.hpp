@@ -134,6 +134,12 @@ class SurveyMatcher {
   /// than MotionSettings::max_unpinned_turn_deg about axes their surfaces hardly pin
   /// (MotionPrediction::unpinned_turn). The match stays; the scan is named.
   void doubt_unpinned_turn(std::size_t i);
+  /// Scan i registered: where it is the MotionSettings::first_sweep_rematch_scans-th sweep, the
+  /// first sweep is matched again against sweeps 1..i (one tree over their model points, deskewed
+  /// by the step into sweep 1 as it stands, up to kFirstSweepRounds times while the match moves
+  /// them), and sweeps 1..i move rigidly to where each trusted match puts them. Scan 0 stays.
+  void rematch_first_sweep(std::size_t i);
+  static constexpr int kFirstSweepRounds = 3;
   void relax(std::size_t newest, int budget);
 
   const MappingSettings& settings_;
@@ -156,8 +162,9 @@ class SurveyMatcher {
   bool interrupted_ = false;
   std::size_t scans_matched_ = 0;
   bool noted_unstructured_ = false;
-  /// The first sweep as read, kept until scan 1 is registered: then the step between them says how
-  /// to deskew it.
+  /// The first sweep as read, kept until scan 1 is registered (then the step between them says how
+  /// to deskew it) and, where it is matched again (MotionSettings::first_sweep_rematch_scans),
+  /// until then.
   std::optional<Scan> first_sweep_;
   /// The metascan scan i's last incremental match took, at one bound: a sweep's second match
   /// (refine_deskew), from a pose a few centimetres from the first's start, takes the same one when
