@@ -7,6 +7,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <initializer_list>
 #include <limits>
 #include <random>
 #include <set>
@@ -207,6 +208,16 @@ TEST(LocalMapVisits, AScanSeenFromAfarGoesWithTheVisitNearestItInTheDrive) {
   // Before the first visit and after the last: theirs.
   EXPECT_EQ(detail::nearest_visits({0, 400, 106}, 207, at_place, 10, 2), (std::vector<std::size_t>{0}));
   EXPECT_EQ(detail::nearest_visits({0, 400, 106}, 207, at_place, 10, 3), (std::vector<std::size_t>{0, 400}));
+}
+
+/// Each of `values`, set into default settings by `set`, fails validation.
+template <class Set>
+void expect_rejected(Set set, std::initializer_list<double> values) {
+  for (const double value : values) {
+    MappingSettings bad;
+    set(bad, value);
+    EXPECT_THROW(bad.validate(), std::invalid_argument) << value;
+  }
 }
 
 struct MovingRun {
@@ -698,21 +709,12 @@ TEST(MovingMapping, AnUnpinnedTurnSumsTheRecentWeaklyPinnedSweepsTurnsAboutTheir
   EXPECT_FALSE(turn(Case{.pinned = 12}).has_value());
   EXPECT_FALSE(turn(Case{.sweep_s = 0.0}).has_value());
   EXPECT_FALSE(turn(Case{.limit_deg = 0.0}).has_value());
-  MappingSettings bad;
-  for (const double limit : {-1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
-    bad.motion.max_unpinned_turn_deg = limit;
-    EXPECT_THROW(bad.validate(), std::invalid_argument) << limit;
-  }
-  bad = MappingSettings{};
-  for (const double window : {0.0, -1.0, std::nan("")}) {
-    bad.motion.unpinned_turn_window_s = window;
-    EXPECT_THROW(bad.validate(), std::invalid_argument) << window;
-  }
-  bad = MappingSettings{};
-  for (const double fraction : {-0.1, 1.5, std::nan("")}) {
-    bad.motion.unpinned_turn_constraint = fraction;
-    EXPECT_THROW(bad.validate(), std::invalid_argument) << fraction;
-  }
+  expect_rejected([](MappingSettings& s, double v) { s.motion.max_unpinned_turn_deg = v; },
+                  {-1.0, std::nan(""), std::numeric_limits<double>::infinity()});
+  expect_rejected([](MappingSettings& s, double v) { s.motion.unpinned_turn_window_s = v; },
+                  {0.0, -1.0, std::nan("")});
+  expect_rejected([](MappingSettings& s, double v) { s.motion.unpinned_turn_constraint = v; },
+                  {-0.1, 1.5, std::nan("")});
 }
 
 // The simulated hand-held rosette scanner standing still in a drive: its surfaces hardly pin a turn
@@ -795,11 +797,11 @@ TEST(MovingMapping, TheFirstSweepMatchedAgainstTheSweepsAfterItTurnsTheMapRight)
     EXPECT_LT((before - after).cwiseAbs().maxCoeff(), 1e-6) << j;
   }
   bool noted = false;
-  for (const std::string& note : again.notes) noted |= note.find("matched again against the 20 sweeps") != std::string::npos;
+  for (const std::string& note : again.notes) {
+    noted |= note.find("matched again against the 20 sweeps") != std::string::npos;
+  }
   EXPECT_TRUE(noted);
-  MappingSettings bad = defaults;
-  bad.motion.first_sweep_rematch_scans = -1;
-  EXPECT_THROW(bad.validate(), std::invalid_argument);
+  expect_rejected([](MappingSettings& s, double v) { s.motion.first_sweep_rematch_scans = int(v); }, {-1.0});
 }
 
 TEST(MovingMapping, ASecondMatchFromThePredictionThatFitsNoCloserChangesNothing) {

@@ -76,7 +76,9 @@ RegistrationHealth health_of(const json& j) {
   if (a.size() != 3) throw std::invalid_argument("weakest_axis is not 3 numbers");
   h.weakest_axis = Eigen::Vector3d(a[0], a[1], a[2]);
   const int failed = j.value("failed", 0);
-  if (failed < 0 || failed > static_cast<int>(HealthTest::kUnpinnedTurn)) throw std::invalid_argument("unknown health test");
+  if (failed < 0 || failed > static_cast<int>(HealthTest::kUnpinnedTurn)) {
+    throw std::invalid_argument("unknown health test");
+  }
   h.failed = static_cast<HealthTest>(failed);
   h.pair_bound_cm = j.at("pair_bound_cm");
   h.retry_bound_cm = j.at("retry_bound_cm");

@@ -139,7 +139,8 @@ std::optional<UnpinnedTurn> MotionPrediction::unpinned_turn(const SurveyState& s
     }
     const Eigen::AngleAxisd rotation(Eigen::Matrix3d(
         (rigid_inverse(state.pose(k - 1)) * state.pose(k)).block<3, 3>(0, 0)));
-    turn.deg += std::abs(rotation.angle() * rotation.axis().dot(state.health(k).weakest_axis)) * (180.0 / std::numbers::pi);
+    const double about_rad = rotation.angle() * rotation.axis().dot(state.health(k).weakest_axis);
+    turn.deg += std::abs(about_rad) * (180.0 / std::numbers::pi);
     ++turn.sweeps;
     turn.seconds = stamp_s - start_s;
   }

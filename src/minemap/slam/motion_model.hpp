@@ -9,7 +9,8 @@
 // both start within reach. Along a direction the last timed sweep's match could not pin, the
 // last step is not repeated (it would repeat its error): the recent well-pinned steps' mean move
 // along it is (MotionSettings::weak_step_constraint). The same constant velocity over one sweep is
-// what the deskew undoes (filter/deskew.hpp).
+// what the deskew undoes (filter/deskew.hpp). And it sums how far the recent sweeps turned about
+// axes their matches could hardly pin (unpinned_turn: a doubt's figure).
 //
 // Reads the state, writes nothing. Thread-safety: const, one thread at a time with the state.
 #include <cstddef>

@@ -496,9 +496,9 @@ void SurveyMatcher::doubt_unpinned_turn(std::size_t i) {
   char text[480];
   std::snprintf(text, sizeof text,
                 "its match and those of the %d sweeps before it turned the sensor by %.0f deg in all in %.1f s about "
-                "axes their surfaces hardly pin (this one's (%.2f, %.2f, %.2f) in the scan's frame, %.3f times as well as the best "
-                "axis; each less than %g): more than %g deg that the surfaces did not measure. A scanner whose "
-                "pattern turns from sweep to sweep (a rosette's) turns its matches with it",
+                "axes their surfaces hardly pin (this one's (%.2f, %.2f, %.2f) in the scan's frame, %.3f times as "
+                "well as the best axis; each less than %g): more than %g deg that the surfaces did not measure. A "
+                "scanner whose pattern turns from sweep to sweep (a rosette's) turns its matches with it",
                 turn->sweeps - 1, turn->deg, turn->seconds, turn->axis.x(), turn->axis.y(), turn->axis.z(),
                 turn->constraint, motion.unpinned_turn_constraint, motion.max_unpinned_turn_deg);
   health.doubt = text;
