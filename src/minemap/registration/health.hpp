@@ -54,7 +54,7 @@ struct HealthSettings {
 };
 
 /// Which test a doubtful match failed (the first, in the order below).
-/// kUnpinnedTurn: not one match's test but the motion's (slam/survey_matcher.cpp,
+/// kUnpinnedTurn: not one match's test but the motion's (slam/sweep_matching.cpp,
 /// doubt_unpinned_turn), kept when the scans are judged again after the loops.
 enum class HealthTest { kNone, kReach, kPaired, kBeyondBound, kEdge, kConstraint, kUnpinnedTurn };
 

@@ -1,0 +1,128 @@
+// A moving sensor's sweeps, after their first match (SurveyMatcher's, slam/survey_matcher.hpp):
+// deskewed again by the step the match found and matched again (refine_deskew), judged over the
+// recent sweeps for turns their surfaces cannot pin (doubt_unpinned_turn), and the first sweep, the
+// survey's frame, matched again once the sweeps after it are in (rematch_first_sweep). Not in the
+// paper: its scanner stood still while it scanned.
+#include <cmath>
+#include <cstdio>
+#include <vector>
+
+#include "minemap/slam/survey_matcher.hpp"
+
+namespace minemap::detail {
+
+void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTiming& timing,
+                                  Convergence convergence) {
+  if (!state_.registered(i)) return;
+  bool models_changed = false;
+  if (i == 1 && first_sweep_) {
+    const SweepTiming first_timing = preparation_.timing_of(*first_sweep_);
+    const Pose first_motion = motion_.sweep_motion(state_, 0, state_.pose(0), 1);
+    state_.set_prepared(0, preparation_.prepare(*first_sweep_, control_, first_timing, first_motion));
+    if (settings_.motion.first_sweep_rematch_scans <= 1) first_sweep_.reset();
+    models_changed = true;
+  }
+  const Pose refined = motion_.sweep_motion(state_, i, state_.pose(i), i - 1);
+  const std::optional<Pose>& used = state_.prepared(i).sweep_motion;
+  const Pose change = used ? rigid_inverse(*used) * refined : refined;
+  const MotionSettings& motion = settings_.motion;
+  const bool deskew_again = models_changed || translation_norm(change) >= motion.refine_min_change_cm ||
+                            rotation_angle_deg(change) >= motion.refine_min_change_deg;
+  // A provisional match that the deskew keeps is still matched again, to ICP's least step.
+  if (!deskew_again && convergence == Convergence::kFinal) return;
+  PreparedScan first = state_.prepared(i);
+  const RegistrationHealth first_health = state_.health(i);
+  if (deskew_again) state_.set_prepared(i, preparation_.prepare(raw, control_, timing, refined));
+  Prediction here;
+  here.objectives.fine = motion_.fine_objective(state_, i);
+  here.start = state_.pose(i);
+  here.start_bound_cm = settings_.pairwise_icp().max_pair_dist_cm;
+  ScanMatch again = match_from(i, here);
+  step1_iterations_ += again.iterations;
+  if (!again.ok() || (again.health.doubtful() && !first_health.doubtful())) {
+    state_.set_prepared(i, std::move(first));  // the first deskew's match stands
+    return;
+  }
+  // The prediction's error is the first match's (the motion model's adaptive bound learns from it).
+  again.health.correction_cm = first_health.correction_cm;
+  again.health.correction_deg = first_health.correction_deg;
+  again.health.moved_cm = first_health.moved_cm;
+  again.health.retry_bound_cm = first_health.retry_bound_cm;
+  again.health.recovered_inliers = first_health.recovered_inliers;
+  // The refinement starts where the first match ended, so it cannot see how the match got there:
+  // a doubt about the move (it started out of reach, or a jump from the prediction that no second
+  // start confirmed: confirm_far_match) stands whatever the refined fit, and a note saying how a
+  // move was confirmed or recovered stays with the scan.
+  if (first_health.doubtful() && first_health.failed == HealthTest::kReach) {
+    again.health.doubt = first_health.doubt;
+    again.health.failed = first_health.failed;
+    again.health.out_of_reach = first_health.out_of_reach;
+  }
+  if (again.health.note.empty()) again.health.note = first_health.note;
+  place(i, again, here.start);
+}
+
+void SurveyMatcher::doubt_unpinned_turn(std::size_t i) {
+  const std::optional<UnpinnedTurn> turn = motion_.unpinned_turn(state_, i);
+  const MotionSettings& motion = settings_.motion;
+  if (!turn || !(turn->deg > motion.max_unpinned_turn_deg) || state_.health(i).doubtful()) return;
+  RegistrationHealth health = state_.health(i);
+  char text[480];
+  std::snprintf(text, sizeof text,
+                "its match and those of the %d sweeps before it turned the sensor by %.0f deg in all in %.1f s about "
+                "axes their surfaces hardly pin (this one's (%.2f, %.2f, %.2f) in the scan's frame, %.3f times as "
+                "well as the best axis; each less than %g): more than %g deg that the surfaces did not measure. A "
+                "scanner whose pattern turns from sweep to sweep (a rosette's) turns its matches with it",
+                turn->sweeps - 1, turn->deg, turn->seconds, turn->axis.x(), turn->axis.y(), turn->axis.z(),
+                turn->constraint, motion.unpinned_turn_constraint, motion.max_unpinned_turn_deg);
+  health.doubt = text;
+  health.failed = HealthTest::kUnpinnedTurn;
+  state_.judged(i, std::move(health));
+}
+
+void SurveyMatcher::rematch_first_sweep(std::size_t i) {
+  const int after = settings_.motion.first_sweep_rematch_scans;
+  if (after <= 1 || i != static_cast<std::size_t>(after) || !first_sweep_) return;
+  const Scan first = std::move(*first_sweep_);
+  first_sweep_.reset();
+  std::vector<std::size_t> later;
+  for (std::size_t j = 1; j <= i; ++j) {
+    if (!state_.registered(j)) return;
+    later.push_back(j);
+  }
+  const SweepTiming timing = preparation_.timing_of(first);
+  // One tree over the later sweeps' model points, in scan 0's frame; they move together, so the
+  // tree moves with them (`shift`, applied to its frame) and is built once.
+  const Pose frame = state_.pose(0);
+  const std::shared_ptr<const PreparedCloud> union_cloud = local_map_.whole_union(state_, later, frame);
+  Pose shift = Pose::Identity();
+  int rounds = 0;
+  for (int round = 0; round < kFirstSweepRounds; ++round) {
+    const Pose motion = motion_.sweep_motion(state_, 0, state_.pose(0), 1);
+    PreparedScan prepared = preparation_.prepare(first, control_, timing, motion);
+    const std::vector<WorldModel> models{{union_cloud.get(), shift * frame}};
+    const ScanMatch match =
+        registration_.register_scan(prepared, state_.pose(0), [&](float, const Pose&) { return models; });
+    step1_iterations_ += match.iterations;
+    if (!match.ok() || match.health.doubtful()) break;
+    // Scan 0 was matched to where the later sweeps say it stands; they move so that it stays.
+    const Pose move = state_.pose(0) * rigid_inverse(match.kept().world_from_data);
+    for (const std::size_t j : later) state_.place(j, move * state_.pose(j));
+    state_.set_prepared(0, std::move(prepared));
+    shift = move * shift;
+    ++rounds;
+    if (translation_norm(move) < settings_.motion.refine_min_change_cm &&
+        rotation_angle_deg(move) < settings_.motion.refine_min_change_deg) {
+      break;
+    }
+  }
+  if (rounds == 0) return;
+  char text[300];
+  std::snprintf(text, sizeof text,
+                "the first sweep (%s) was matched again against the %zu sweeps after it once they were in (%d "
+                "round(s)); they moved together %.1f cm and turned %.2f deg about it",
+                first.name.c_str(), i, rounds, translation_norm(shift), rotation_angle_deg(shift));
+  notes_.emplace_back(text);
+}
+
+}  // namespace minemap::detail
