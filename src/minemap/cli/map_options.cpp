@@ -216,7 +216,8 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
          "they move together to where that puts them (0 = off)");
   number(g, "--max-unpinned-turn-deg", mapping.motion.max_unpinned_turn_deg,
          "Timed sweeps: doubtful when the matches of the last second turned the sensor more than this about axes "
-         "their surfaces hardly pin (a rosette scanner's pattern turns them; 0 = off)");
+         "their surfaces hardly pin (a rosette scanner's pattern turns them), and those turns are taken out "
+         "(0 = off)");
   number(g, "--metascan-margin-cm", mapping.metascan_margin_cm,
          "Metascan: model points within the scan's box grown by the pair bound and this");
   number(g, "--local-map-cell-cm", mapping.motion.local_map_cell_cm,

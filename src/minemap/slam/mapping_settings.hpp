@@ -179,8 +179,9 @@ struct MotionSettings {
   /// A timed sweep is doubtful when its match and those of the sweeps before it, each pinning its
   /// weakest turn less than unpinned_turn_constraint of its best (RegistrationHealth::
   /// rotation_constraint), turned the sensor by more than this in all (each sweep's turn counted
-  /// whatever its sense) about those axes within the last unpinned_turn_window_s. Surfaces that
-  /// cannot see a turn do not measure one, yet a scanner whose pattern turns from sweep to sweep (a
+  /// whatever its sense) about those axes within the last unpinned_turn_window_s; those steps then
+  /// lose their turns about those axes (SurveyMatcher::doubt_unpinned_turn). Surfaces that cannot
+  /// see a turn do not measure one, yet a scanner whose pattern turns from sweep to sweep (a
   /// rosette's, 6 deg a sweep in the simulator) pulls its matches round with it: the simulated
   /// hand-held sensor standing still was turned 8-20 deg a sweep back and forth (136 deg in a
   /// second), walking at 0.5 m/s 7 deg a sweep for 12 sweeps (72), both with exit 0; walking at

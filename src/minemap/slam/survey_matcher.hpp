@@ -136,7 +136,8 @@ class SurveyMatcher {
   void refine_deskew(std::size_t i, const Scan& raw, const SweepTiming& timing, Convergence convergence);
   /// A timed sweep registered and judged: doubtful when it and the sweeps before it turned more
   /// than MotionSettings::max_unpinned_turn_deg about axes their surfaces hardly pin
-  /// (MotionPrediction::unpinned_turn). The match stays; the scan is named.
+  /// (MotionPrediction::unpinned_turn). The scan is named, and its step loses its turn about its
+  /// weakest axis (the rest of its match stays).
   void doubt_unpinned_turn(std::size_t i);
   /// Scan i registered: where it is the MotionSettings::first_sweep_rematch_scans-th sweep, the
   /// first sweep is matched again against sweeps 1..i (one tree over their model points, deskewed

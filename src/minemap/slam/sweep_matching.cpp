@@ -7,6 +7,8 @@
 #include <cstdio>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "minemap/slam/survey_matcher.hpp"
 
 namespace minemap::detail {
@@ -66,18 +68,42 @@ void SurveyMatcher::doubt_unpinned_turn(std::size_t i) {
   const std::optional<UnpinnedTurn> turn = motion_.unpinned_turn(state_, i);
   const MotionSettings& motion = settings_.motion;
   if (!turn || !(turn->deg > motion.max_unpinned_turn_deg) || state_.health(i).doubtful()) return;
-  RegistrationHealth health = state_.health(i);
   char text[480];
   std::snprintf(text, sizeof text,
                 "its match and those of the %d sweeps before it turned the sensor by %.0f deg in all in %.1f s about "
                 "axes their surfaces hardly pin (this one's (%.2f, %.2f, %.2f) in the scan's frame, %.3f times as "
-                "well as the best axis; each less than %g): more than %g deg that the surfaces did not measure. A "
-                "scanner whose pattern turns from sweep to sweep (a rosette's) turns its matches with it",
+                "well as the best axis; each less than %g): more than %g deg that the surfaces did not measure (a "
+                "scanner whose pattern turns from sweep to sweep, a rosette's, turns its matches with it). Their "
+                "turns about those axes are taken out: the map there assumes the sensor did not turn about them",
                 turn->sweeps - 1, turn->deg, turn->seconds, turn->axis.x(), turn->axis.y(), turn->axis.z(),
                 turn->constraint, motion.unpinned_turn_constraint, motion.max_unpinned_turn_deg);
-  health.doubt = text;
-  health.failed = HealthTest::kUnpinnedTurn;
-  state_.judged(i, std::move(health));
+  char earlier[300];
+  std::snprintf(earlier, sizeof earlier,
+                "one of the sweeps up to %s whose matches turned the sensor by %.0f deg in all in %.1f s about axes "
+                "their surfaces hardly pin (%s says more); its turn about its own is taken out",
+                state_.outcome(i).name.c_str(), turn->deg, turn->seconds, state_.outcome(i).name.c_str());
+  // What the surfaces did not measure is not kept: each step of the run loses its turn about the
+  // axis its match pinned least (the rest of the match stays), the sweeps chained again from the
+  // first one's start; the next prediction repeats no such turn, and the sweeps after them see the
+  // walls from a map of several patterns, not of one. Each sweep of the run is named.
+  const std::size_t first = i + 1 - static_cast<std::size_t>(turn->sweeps);
+  std::vector<Pose> steps;
+  for (std::size_t k = first; k <= i; ++k) steps.push_back(rigid_inverse(state_.pose(k - 1)) * state_.pose(k));
+  for (std::size_t k = first; k <= i; ++k) {
+    const Pose& step = steps[k - first];
+    const Eigen::Vector3d& axis = state_.health(k).weakest_axis;
+    const Eigen::Quaterniond rotation(Eigen::Matrix3d(step.block<3, 3>(0, 0)));
+    const double along = rotation.vec().dot(axis);
+    Eigen::Quaterniond about(rotation.w(), along * axis.x(), along * axis.y(), along * axis.z());
+    Pose kept = step;
+    if (about.norm() > 0.0) kept.block<3, 3>(0, 0) = (rotation * about.normalized().conjugate()).toRotationMatrix();
+    state_.place(k, state_.pose(k - 1) * kept);
+    RegistrationHealth health = state_.health(k);
+    if (health.doubtful()) continue;
+    health.doubt = k == i ? text : earlier;
+    health.failed = HealthTest::kUnpinnedTurn;
+    state_.judged(k, std::move(health));
+  }
 }
 
 void SurveyMatcher::rematch_first_sweep(std::size_t i) {
