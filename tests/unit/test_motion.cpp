@@ -210,6 +210,20 @@ TEST(LocalMapVisits, AScanSeenFromAfarGoesWithTheVisitNearestItInTheDrive) {
   EXPECT_EQ(detail::nearest_visits({0, 400, 106}, 207, at_place, 10, 3), (std::vector<std::size_t>{0, 400}));
 }
 
+/// Sweep i of a hand-built state: 40 random points as its clouds; `sweep_s` 0 makes it a keyframe
+/// without times (no stamp).
+void add_sweep(detail::SurveyState& state, CpuBackend& cpu, const MappingSettings& settings, std::size_t i,
+               double sweep_s, double stamp_s, std::uint32_t seed) {
+  Scan scan;
+  scan.name = "sweep" + std::to_string(i);
+  detail::PreparedScan prepared;
+  prepared.cloud = cpu.prepare(test::random_cloud(40, -500.f, 500.f, seed), settings.tree);
+  prepared.model_cloud = prepared.probe = prepared.cloud;
+  prepared.sweep_s = sweep_s;
+  prepared.stamp_s = sweep_s > 0.0 ? stamp_s : std::nan("");
+  state.add(scan, std::move(prepared));
+}
+
 /// Each of `values`, set into default settings by `set`, fails validation.
 template <class Set>
 void expect_rejected(Set set, std::initializer_list<double> values) {
@@ -598,14 +612,7 @@ TEST(MovingMapping, ATimedSweepsPredictionTakesTheWellPinnedStepsMoveAlongItsLas
     settings.motion.weak_step_constraint = c.weak_step_constraint;
     detail::SurveyState state;
     for (std::size_t i = 0; i < 12; ++i) {
-      Scan scan;
-      scan.name = "sweep" + std::to_string(i);
-      detail::PreparedScan prepared;
-      prepared.cloud = cpu.prepare(test::random_cloud(40, -500.f, 500.f, 50 + std::uint32_t(i)), settings.tree);
-      prepared.model_cloud = prepared.probe = prepared.cloud;
-      prepared.sweep_s = c.sweep_s;
-      prepared.stamp_s = c.sweep_s > 0.0 ? stamp_of(i) : std::nan("");
-      state.add(scan, std::move(prepared));
+      add_sweep(state, cpu, settings, i, c.sweep_s, stamp_of(i), 50 + std::uint32_t(i));
       if (i == 11) break;  // the sweep predicted
       state.place(i, pose_of(i));
       RegistrationHealth health;
@@ -670,14 +677,7 @@ TEST(MovingMapping, AnUnpinnedTurnSumsTheRecentWeaklyPinnedSweepsTurnsAboutTheir
     detail::SurveyState state;
     Pose pose = Pose::Identity();
     for (std::size_t i = 0; i <= 12; ++i) {
-      Scan scan;
-      scan.name = "sweep" + std::to_string(i);
-      detail::PreparedScan prepared;
-      prepared.cloud = cpu.prepare(test::random_cloud(40, -500.f, 500.f, 70 + std::uint32_t(i)), settings.tree);
-      prepared.model_cloud = prepared.probe = prepared.cloud;
-      prepared.sweep_s = c.sweep_s;
-      prepared.stamp_s = c.sweep_s > 0.0 ? 0.1 * double(i) : std::nan("");
-      state.add(scan, std::move(prepared));
+      add_sweep(state, cpu, settings, i, c.sweep_s, 0.1 * double(i), 70 + std::uint32_t(i));
       if (i > 0) {
         Pose step = Pose::Identity();
         step.block<3, 3>(0, 0) =
