@@ -719,8 +719,8 @@ TEST(MovingMapping, AnUnpinnedTurnSumsTheRecentWeaklyPinnedSweepsTurnsAboutTheir
 
 // The simulated hand-held rosette scanner in a drive: its surfaces hardly pin a turn about its view
 // axis (0.03-0.05 of the best axis), and its pattern turns 6 deg from one sweep to the next. Walking
-// slowly (0.5 m/s) the matches follow the pattern, 7 deg a sweep, and the map turns 72 deg off the
-// truth, trusted; with the test the sweeps that turned so are named and their turn about that axis
+// slowly (0.5 m/s) the matches follow the pattern, 7 deg a sweep, and the map turns 80-88 deg off
+// the truth, none of its sweeps named for it; with the test the sweeps that turned so are named and their turn about that axis
 // taken out, and the sweeps after them stand right (within 3 deg at the 40th). Standing still the
 // matches turn the sensor back and forth, 7-11 deg a sweep: named, though the map is not right
 // there. Walking at 1.4 m/s (the sway turns the sensor about that axis too, 8-9 deg a second) no
@@ -759,7 +759,9 @@ TEST(MovingMapping, ARosetteTurnedByItsPatternIsNamedAndItsTurnTakenOut) {
               "with it, %zu sweeps named\n",
               worst_deg, turn_off_deg(named, walk, 39), unpinned(named));
   ASSERT_GT(worst_deg, 30.0);
-  EXPECT_TRUE(trusted.doubtful().empty());
+  // (No sweep named for its turn; whether another test happens to doubt one of them differs with
+  // the compiler's last bits: none with GCC, one under clang's TSan build.)
+  EXPECT_EQ(unpinned(trusted), 0u);
   EXPECT_GT(unpinned(named), 0u);
   EXPECT_LT(turn_off_deg(named, walk, 39), 3.0);
 
