@@ -61,6 +61,7 @@ struct MapOptions {
   bool accept_doubtful = false;
   bool no_retry = false;
   bool no_recovery = false;
+  bool no_first_sweep_fit = false;
   bool provisional_all_points = false;
   bool wide_coarse_all_points = false;
   bool moving_point_to_plane = false;

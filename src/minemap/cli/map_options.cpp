@@ -214,6 +214,9 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
   number(g, "--first-sweep-rematch", mapping.motion.first_sweep_rematch_scans,
          "Timed sweeps: the first sweep is matched again against this many sweeps after it once they are in, and "
          "they move together to where that puts them (0 = off)");
+  flag(g, "--no-first-sweep-fit", map.no_first_sweep_fit,
+       "Timed sweeps: the first sweep matched again is deskewed by the step into sweep 1, its own motion not "
+       "fitted");
   number(g, "--max-unpinned-turn-deg", mapping.motion.max_unpinned_turn_deg,
          "Timed sweeps: doubtful when the matches of the last second turned the sensor more than this about axes "
          "their surfaces hardly pin (a rosette scanner's pattern turns them), and those turns are taken out "
@@ -344,6 +347,7 @@ void finish_settings(MapCommand& command) {
   if (options.no_health_check) settings.health.enabled = false;
   if (options.no_retry) settings.retry_bound_factors.clear();
   if (options.no_recovery) settings.recovery.enabled = false;
+  if (options.no_first_sweep_fit) settings.motion.first_sweep_fit = false;
   if (options.provisional_all_points) settings.motion.provisional_probe = false;
   if (options.wide_coarse_all_points) settings.motion.wide_coarse_probe = false;
   if (options.moving_point_to_plane) settings.motion.plane_objective = true;

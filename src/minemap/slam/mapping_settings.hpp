@@ -200,6 +200,12 @@ struct MotionSettings {
   /// first steps were 0.2-4.6 deg off (docs/benchmarks.md, "The first sweep matched again").
   /// 0: off.
   int first_sweep_rematch_scans = 20;
+  /// ...and there its own motion over the sweep is fitted against them first (registration/
+  /// sweep_fit.hpp), the deskew then by that motion: the step into sweep 1 says how the sensor moved
+  /// after the first sweep, not during it. The simulated spinning loops start in a corner: their
+  /// first sweep turned 43 deg, the step said 12-13, and the map kept 6 deg of it (docs/
+  /// benchmarks.md, "The first sweep's own motion"). false: the step's motion, as for later sweeps.
+  bool first_sweep_fit = true;
   void validate() const;
   bool operator==(const MotionSettings&) const = default;
 };

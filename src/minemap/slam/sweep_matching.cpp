@@ -68,7 +68,7 @@ void SurveyMatcher::doubt_unpinned_turn(std::size_t i) {
   const std::optional<UnpinnedTurn> turn = motion_.unpinned_turn(state_, i);
   const MotionSettings& motion = settings_.motion;
   if (!turn || !(turn->deg > motion.max_unpinned_turn_deg) || state_.health(i).doubtful()) return;
-  char text[480];
+  char text[640];
   std::snprintf(text, sizeof text,
                 "its match and those of the %d sweeps before it turned the sensor by %.0f deg in all in %.1f s about "
                 "axes their surfaces hardly pin (this one's (%.2f, %.2f, %.2f) in the scan's frame, %.3f times as "
@@ -121,14 +121,17 @@ void SurveyMatcher::rematch_first_sweep(std::size_t i) {
   // tree moves with them (`shift`, applied to its frame) and is built once.
   const Pose frame = state_.pose(0);
   const std::shared_ptr<const PreparedCloud> union_cloud = local_map_.whole_union(state_, later, frame);
+  const Pose step_motion = motion_.sweep_motion(state_, 0, state_.pose(0), 1);
+  const std::optional<SweepFit> fit = fit_first_sweep(first, timing, *union_cloud, frame, step_motion);
   Pose shift = Pose::Identity();
   int rounds = 0;
   for (int round = 0; round < kFirstSweepRounds; ++round) {
-    const Pose motion = motion_.sweep_motion(state_, 0, state_.pose(0), 1);
+    // Without a fit, each round deskews by the step into sweep 1 as the last round left it.
+    const Pose motion = fit ? fit->motion : motion_.sweep_motion(state_, 0, state_.pose(0), 1);
+    const Pose start = fit ? fit->world_from_sweep * rigid_inverse(state_.points_from_file(0)) : state_.pose(0);
     PreparedScan prepared = preparation_.prepare(first, control_, timing, motion);
     const std::vector<WorldModel> models{{union_cloud.get(), shift * frame}};
-    const ScanMatch match =
-        registration_.register_scan(prepared, state_.pose(0), [&](float, const Pose&) { return models; });
+    const ScanMatch match = registration_.register_scan(prepared, start, [&](float, const Pose&) { return models; });
     step1_iterations_ += match.iterations;
     if (!match.ok() || match.health.doubtful()) break;
     // Scan 0 was matched to where the later sweeps say it stands; they move so that it stays.
@@ -137,18 +140,45 @@ void SurveyMatcher::rematch_first_sweep(std::size_t i) {
     state_.set_prepared(0, std::move(prepared));
     shift = move * shift;
     ++rounds;
-    if (translation_norm(move) < settings_.motion.refine_min_change_cm &&
-        rotation_angle_deg(move) < settings_.motion.refine_min_change_deg) {
-      break;
+    if (fit || (translation_norm(move) < settings_.motion.refine_min_change_cm &&
+                rotation_angle_deg(move) < settings_.motion.refine_min_change_deg)) {
+      break;  // a fitted motion is the same in every round
     }
   }
   if (rounds == 0) return;
-  char text[300];
-  std::snprintf(text, sizeof text,
-                "the first sweep (%s) was matched again against the %zu sweeps after it once they were in (%d "
-                "round(s)); they moved together %.1f cm and turned %.2f deg about it",
-                first.name.c_str(), i, rounds, translation_norm(shift), rotation_angle_deg(shift));
+  char text[420];
+  const int length = std::snprintf(
+      text, sizeof text,
+      "the first sweep (%s) was matched again against the %zu sweeps after it once they were in (%d round(s)); "
+      "they moved together %.1f cm and turned %.2f deg about it",
+      first.name.c_str(), i, rounds, translation_norm(shift), rotation_angle_deg(shift));
+  if (fit && length > 0 && static_cast<std::size_t>(length) < sizeof text) {
+    std::snprintf(text + length, sizeof text - static_cast<std::size_t>(length),
+                  "; its own motion over the sweep, fitted against them, turned %.1f deg and moved %.1f cm (the "
+                  "step into sweep 1 said %.1f deg, %.1f cm)",
+                  rotation_angle_deg(fit->motion), translation_norm(fit->motion), rotation_angle_deg(step_motion),
+                  translation_norm(step_motion));
+  }
   notes_.emplace_back(text);
+}
+
+std::optional<SweepFit> SurveyMatcher::fit_first_sweep(const Scan& first, const SweepTiming& timing,
+                                                       const PreparedCloud& later, const Pose& frame,
+                                                       const Pose& step_motion) {
+  if (!settings_.motion.first_sweep_fit || timing.empty()) return std::nullopt;
+  // The fit takes the sweep in its file's frame, where the deskew's motion is.
+  const Pose file_from_points = rigid_inverse(state_.points_from_file(0));
+  std::vector<Eigen::Vector3d> points(first.size());
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    points[k] = (file_from_points * first.points_cm[k].cast<double>().homogeneous()).head<3>();
+  }
+  const SurfaceNormals normals(later.points(), settings_.plane_cell_cm);
+  SweepFitSettings fit_settings;
+  fit_settings.max_pair_dist_cm = settings_.pairwise_icp().max_pair_dist_cm;
+  const SweepFit fit = fit_sweep(backend_, points, timing.fraction, WorldModel{&later, frame}, normals,
+                                 state_.pose(0) * state_.points_from_file(0), step_motion, fit_settings);
+  if (!fit.converged) return std::nullopt;
+  return fit;
 }
 
 }  // namespace minemap::detail
