@@ -234,6 +234,30 @@ void expect_rejected(Set set, std::initializer_list<double> values) {
   }
 }
 
+/// How far sweep k's turn from sweep 0 in `result` is from the truth's, deg.
+double turn_from_first_off_deg(const MappingResult& result, const sim::MovingSurvey& survey, std::size_t k) {
+  const Pose mapped = rigid_inverse(result.scans[0].pose_cm) * result.scans[k].pose_cm;
+  const Pose truth = rigid_inverse(survey.truth_cm[0]) * survey.truth_cm[k];
+  return rotation_angle_deg(rigid_inverse(truth) * mapped);
+}
+
+/// Sweeps 1..last stand the same relative to sweep 1 in both results (moved together, rigidly).
+void expect_moved_together(const MappingResult& a, const MappingResult& b, std::size_t last) {
+  for (std::size_t j = 2; j <= last; ++j) {
+    const Pose before = rigid_inverse(a.scans[1].pose_cm) * a.scans[j].pose_cm;
+    const Pose after = rigid_inverse(b.scans[1].pose_cm) * b.scans[j].pose_cm;
+    EXPECT_LT((before - after).cwiseAbs().maxCoeff(), 1e-6) << j;
+  }
+}
+
+/// Whether one of `result`'s notes contains `text`.
+bool has_note(const MappingResult& result, const std::string& text) {
+  for (const std::string& note : result.notes) {
+    if (note.find(text) != std::string::npos) return true;
+  }
+  return false;
+}
+
 struct MovingRun {
   PoseErrors errors;
   std::size_t doubtful = 0;
@@ -741,11 +765,6 @@ TEST(MovingMapping, ARosetteTurnedByItsPatternIsNamedAndItsTurnTakenOut) {
     }
     return n;
   };
-  const auto turn_off_deg = [](const MappingResult& result, const sim::MovingSurvey& survey, std::size_t k) {
-    const Pose mapped = rigid_inverse(result.scans[0].pose_cm) * result.scans[k].pose_cm;
-    const Pose truth = rigid_inverse(survey.truth_cm[0]) * survey.truth_cm[k];
-    return rotation_angle_deg(rigid_inverse(truth) * mapped);
-  };
   MappingSettings off;
   off.motion.max_unpinned_turn_deg = 0.0;
   const sim::MovingSurvey walk = sim::simulate_moving_survey(slow);
@@ -754,16 +773,16 @@ TEST(MovingMapping, ARosetteTurnedByItsPatternIsNamedAndItsTurnTakenOut) {
   ASSERT_TRUE(trusted.all_registered());
   ASSERT_TRUE(named.all_registered());
   double worst_deg = 0.0;  // the case: the map turned, and every sweep was trusted
-  for (std::size_t k = 0; k < walk.scans.size(); ++k) worst_deg = std::max(worst_deg, turn_off_deg(trusted, walk, k));
+  for (std::size_t k = 0; k < walk.scans.size(); ++k) worst_deg = std::max(worst_deg, turn_from_first_off_deg(trusted, walk, k));
   std::printf("walking at 0.5 m/s: turned up to %.1f deg off the truth with the test off; the 40th %.1f deg off "
               "with it, %zu sweeps named\n",
-              worst_deg, turn_off_deg(named, walk, 39), unpinned(named));
+              worst_deg, turn_from_first_off_deg(named, walk, 39), unpinned(named));
   ASSERT_GT(worst_deg, 30.0);
   // (No sweep named for its turn; whether another test happens to doubt one of them differs with
   // the compiler's last bits: none with GCC, one under clang's TSan build.)
   EXPECT_EQ(unpinned(trusted), 0u);
   EXPECT_GT(unpinned(named), 0u);
-  EXPECT_LT(turn_off_deg(named, walk, 39), 3.0);
+  EXPECT_LT(turn_from_first_off_deg(named, walk, 39), 3.0);
 
   sim::MovingSimulationSettings standing = slow;
   standing.speed_mps = 0.0;
@@ -772,7 +791,7 @@ TEST(MovingMapping, ARosetteTurnedByItsPatternIsNamedAndItsTurnTakenOut) {
   const MappingResult still_trusted = map_survey(still.scans, off, cpu);
   worst_deg = 0.0;
   for (std::size_t k = 0; k < still.scans.size(); ++k) {
-    worst_deg = std::max(worst_deg, turn_off_deg(still_trusted, still, k));
+    worst_deg = std::max(worst_deg, turn_from_first_off_deg(still_trusted, still, k));
   }
   std::printf("standing still: turned up to %.1f deg with the test off\n", worst_deg);
   ASSERT_GT(worst_deg, 10.0);
@@ -806,26 +825,13 @@ TEST(MovingMapping, TheFirstSweepMatchedAgainstTheSweepsAfterItTurnsTheMapRight)
   const MappingResult again = map_survey(survey.scans, defaults, cpu);
   ASSERT_TRUE(once.all_registered());
   ASSERT_TRUE(again.all_registered());
-  const auto turn_off_deg = [&](const MappingResult& result, std::size_t k) {
-    const Pose mapped = rigid_inverse(result.scans[0].pose_cm) * result.scans[k].pose_cm;
-    const Pose truth = rigid_inverse(survey.truth_cm[0]) * survey.truth_cm[k];
-    return rotation_angle_deg(rigid_inverse(truth) * mapped);
-  };
-  std::printf("sweep 20 turned off the truth: matched once %.2f deg, again %.2f deg\n", turn_off_deg(once, 20),
-              turn_off_deg(again, 20));
-  EXPECT_GT(turn_off_deg(once, 20), 3.0);  // the case
-  for (const std::size_t k : {5u, 10u, 20u}) EXPECT_LT(turn_off_deg(again, k), 1.0) << k;
+  std::printf("sweep 20 turned off the truth: matched once %.2f deg, again %.2f deg\n", turn_from_first_off_deg(once, survey, 20),
+              turn_from_first_off_deg(again, survey, 20));
+  EXPECT_GT(turn_from_first_off_deg(once, survey, 20), 3.0);  // the case
+  for (const std::size_t k : {5u, 10u, 20u}) EXPECT_LT(turn_from_first_off_deg(again, survey, k), 1.0) << k;
   EXPECT_EQ(again.scans[0].pose_cm, once.scans[0].pose_cm);
-  for (std::size_t j = 1; j <= 20; ++j) {
-    const Pose before = rigid_inverse(once.scans[1].pose_cm) * once.scans[j].pose_cm;
-    const Pose after = rigid_inverse(again.scans[1].pose_cm) * again.scans[j].pose_cm;
-    EXPECT_LT((before - after).cwiseAbs().maxCoeff(), 1e-6) << j;
-  }
-  bool noted = false;
-  for (const std::string& note : again.notes) {
-    noted |= note.find("matched again against the 20 sweeps") != std::string::npos;
-  }
-  EXPECT_TRUE(noted);
+  expect_moved_together(once, again, 20);
+  EXPECT_TRUE(has_note(again, "matched again against the 20 sweeps"));
   expect_rejected([](MappingSettings& s, double v) { s.motion.first_sweep_rematch_scans = int(v); }, {-1.0});
 }
 
@@ -851,15 +857,10 @@ TEST(MovingMapping, TheFirstSweepsOwnMotionFittedTurnsTheMapOfALoopStartingInACo
   const MappingResult fitted = map_survey(survey.scans, defaults, cpu);
   ASSERT_TRUE(stepped.all_registered());
   ASSERT_TRUE(fitted.all_registered());
-  const auto turn_off_deg = [&](const MappingResult& result, std::size_t k) {
-    const Pose mapped = rigid_inverse(result.scans[0].pose_cm) * result.scans[k].pose_cm;
-    const Pose truth = rigid_inverse(survey.truth_cm[0]) * survey.truth_cm[k];
-    return rotation_angle_deg(rigid_inverse(truth) * mapped);
-  };
   std::printf("sweep 20 turned off the truth: deskewed by the step %.2f deg, by the fitted motion %.2f deg\n",
-              turn_off_deg(stepped, 20), turn_off_deg(fitted, 20));
-  EXPECT_GT(turn_off_deg(stepped, 20), 4.0);  // the case
-  for (const std::size_t k : {1u, 10u, 20u}) EXPECT_LT(turn_off_deg(fitted, k), 3.0) << k;
+              turn_from_first_off_deg(stepped, survey, 20), turn_from_first_off_deg(fitted, survey, 20));
+  EXPECT_GT(turn_from_first_off_deg(stepped, survey, 20), 4.0);  // the case
+  for (const std::size_t k : {1u, 10u, 20u}) EXPECT_LT(turn_from_first_off_deg(fitted, survey, k), 3.0) << k;
   // The first sweep is deskewed by the fitted motion (its turn near the truth's), not by the step's.
   const double half_s = 0.5 * simulation.sweep_period_s();
   const Pose true_motion = rigid_inverse(survey.trajectory.T_world_sensor(survey.stamps_s[0] - half_s)) *
@@ -872,14 +873,8 @@ TEST(MovingMapping, TheFirstSweepsOwnMotionFittedTurnsTheMapOfALoopStartingInACo
   EXPECT_GT(rotation_angle_deg(rigid_inverse(true_motion) * *stepped.scans[0].sweep_motion_cm), 20.0);
   EXPECT_LT(rotation_angle_deg(rigid_inverse(true_motion) * *fitted.scans[0].sweep_motion_cm), 5.0);
   EXPECT_EQ(fitted.scans[0].pose_cm, stepped.scans[0].pose_cm);
-  for (std::size_t j = 2; j <= 20; ++j) {  // sweeps 1-20 as matched before the rematch, moved together
-    const Pose before = rigid_inverse(stepped.scans[1].pose_cm) * stepped.scans[j].pose_cm;
-    const Pose after = rigid_inverse(fitted.scans[1].pose_cm) * fitted.scans[j].pose_cm;
-    EXPECT_LT((before - after).cwiseAbs().maxCoeff(), 1e-6) << j;
-  }
-  bool noted = false;
-  for (const std::string& note : fitted.notes) noted |= note.find("its own motion over the sweep, fitted") != std::string::npos;
-  EXPECT_TRUE(noted);
+  expect_moved_together(stepped, fitted, 20);  // as matched before the rematch
+  EXPECT_TRUE(has_note(fitted, "its own motion over the sweep, fitted"));
 }
 
 TEST(MovingMapping, ASecondMatchFromThePredictionThatFitsNoCloserChangesNothing) {
