@@ -220,6 +220,11 @@ std::vector<Row> reader_rows() {
                   ply_read, InputProblem::kTruncated, byte(ply_header(4, true).size()), "file ends inside the vertices"});
   rows.push_back({"kitti bin", "truncated", "000001.bin", kitti(kGood).substr(0, 61), kitti_read,
                   InputProblem::kTruncated, byte(48), "truncated"});
+  // A point's time that is not a number: its sweep could not be deskewed (the line of the point).
+  rows.push_back({"pcd ascii", "NaN time", "t.pcd",
+                  "VERSION 0.7\nFIELDS x y z time\nSIZE 4 4 4 8\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 3\nHEIGHT 1\n"
+                  "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA ascii\n1 2 3 0.0\n4 5 6 nan\n7 8 9 0.1\n",
+                  pcd_read, InputProblem::kNonFinite, line(12), "time is not a finite number"});
   // Header counts beyond the limits: refused from the header, before anything is allocated.
   for (const char* data : {"ascii", "binary", "binary_compressed"}) {
     const std::string huge = pcd(kGood, data, 1'000'000'000'000);

@@ -875,6 +875,23 @@ TEST(MovingMapping, TheFirstSweepsOwnMotionFittedTurnsTheMapOfALoopStartingInACo
   EXPECT_EQ(fitted.scans[0].pose_cm, stepped.scans[0].pose_cm);
   expect_moved_together(stepped, fitted, 20);  // as matched before the rematch
   EXPECT_TRUE(has_note(fitted, "its own motion over the sweep, fitted"));
+
+  // The same sweeps stored about another origin (a file's points far from its frame's origin, read
+  // relative to a local one): the fit works in the file's frame, the match in the points' frame.
+  std::vector<Scan> moved = survey.scans;
+  const Eigen::Vector3f offset(360.0f, -240.0f, 55.0f);
+  for (Scan& scan : moved) {
+    for (Eigen::Vector3f& p : scan.points_cm) p -= offset;
+    scan.local_origin_cm += offset.cast<double>();
+  }
+  const MappingResult elsewhere = map_survey(moved, defaults, cpu);
+  ASSERT_TRUE(elsewhere.all_registered());
+  ASSERT_TRUE(elsewhere.scans[0].sweep_motion_cm.has_value());
+  std::printf("stored about another origin: sweep 20 %.2f deg off, deskewed by %.1f deg\n",
+              turn_from_first_off_deg(elsewhere, survey, 20), rotation_angle_deg(*elsewhere.scans[0].sweep_motion_cm));
+  EXPECT_LT(turn_from_first_off_deg(elsewhere, survey, 20), 3.0);
+  EXPECT_LT(rotation_angle_deg(rigid_inverse(true_motion) * *elsewhere.scans[0].sweep_motion_cm), 5.0);
+  EXPECT_TRUE(has_note(elsewhere, "its own motion over the sweep, fitted"));
 }
 
 TEST(MovingMapping, ASecondMatchFromThePredictionThatFitsNoCloserChangesNothing) {

@@ -26,6 +26,7 @@ ScanBuilder::AddResult ScanBuilder::add(double x, double y, double z, const Poin
     return AddResult::kOk;
   }
   if (points_cm_.size() >= max_points_) return AddResult::kTooManyPoints;
+  if ((columns_ & kTime) && !std::isfinite(values.time_s)) return AddResult::kNonFiniteTime;
   const Eigen::Vector3d p_file(x, y, z);
   const auto to_cm = [&](const Eigen::Vector3d& v) -> Eigen::Vector3d {
     return right_handed_to_3dtk_ ? right_handed_to_3dtk(v, scale_to_cm_) : Eigen::Vector3d(v * scale_to_cm_);
@@ -57,6 +58,7 @@ std::string ScanBuilder::describe(AddResult result) const {
     return "coordinate beyond 1e10 cm (100000 km): not a point of a survey (binary garbage, or the wrong format or "
            "unit?)";
   }
+  if (result == AddResult::kNonFiniteTime) return "the point's time is not a finite number";
   return "coordinate out of range: the point does not fit a float in cm";
 }
 

@@ -36,7 +36,8 @@ class ScanBuilder {
     kOk,               ///< added, or dropped as a NaN point (counted, see nan_dropped())
     kTooManyPoints,    ///< more than ReadSettings::max_points
     kOutOfFloatRange,  ///< the point, relative to the local origin, does not fit a float
-    kImplausible       ///< a coordinate beyond kMaxPlausibleCoordinate_cm
+    kImplausible,      ///< a coordinate beyond kMaxPlausibleCoordinate_cm
+    kNonFiniteTime     ///< a point's time (kept) is inf or NaN: its sweep could not be deskewed
   };
 
   ScanBuilder(const std::filesystem::path& path, const ReadSettings& settings, LengthUnit default_unit);
@@ -84,7 +85,8 @@ class ScanBuilder {
   /// Message and kind for a failed add(), for the caller to throw at its location.
   std::string describe(AddResult result) const;
   static InputProblem problem_of(AddResult result) {
-    return result == AddResult::kTooManyPoints ? InputProblem::kCountBeyondLimits : InputProblem::kMalformed;
+    if (result == AddResult::kTooManyPoints) return InputProblem::kCountBeyondLimits;
+    return result == AddResult::kNonFiniteTime ? InputProblem::kNonFinite : InputProblem::kMalformed;
   }
 
  private:

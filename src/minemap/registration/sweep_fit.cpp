@@ -21,6 +21,7 @@ constexpr int kUnknowns = 12;             // the middle's pose (6), then the mot
 double instant_fraction(int k) { return static_cast<double>(k) / kInstants - 0.5; }
 
 int instant_of(float fraction) {
+  if (!std::isfinite(fraction)) return kInstants / 2;  // sweep_timing gives none; taken at the middle
   const double f = std::clamp(static_cast<double>(fraction) + 0.5, 0.0, 1.0);
   return static_cast<int>(std::lround(f * kInstants));
 }
@@ -86,6 +87,7 @@ SweepFit fit_sweep(ComputeBackend& backend, std::span<const Eigen::Vector3d> poi
   fit.world_from_sweep = start;
   Twist motion = se3_log(start_motion);
   const Pose model_from_world = rigid_inverse(model.world_from_model);
+  const std::span<const Eigen::Vector3f> model_points = model.cloud->points();
   const Eigen::Matrix3d model_to_world = model.world_from_model.block<3, 3>(0, 0);
   // The data cloud is in the world, so the model is placed by its inverse.
   const std::vector<ModelPlacement> placements{{model.cloud, model_from_world, model.skip}};
@@ -99,6 +101,7 @@ SweepFit fit_sweep(ComputeBackend& backend, std::span<const Eigen::Vector3d> poi
     for (std::size_t i = 0; i < points_cm.size(); ++i) {
       if (std::abs(instant_fraction(instant[i])) <= reach + 1e-12) used.push_back(i);
     }
+    const bool last = stage == settings.stages;
     bool converged = false;
     for (int iteration = 0; iteration < settings.max_iterations && !converged; ++iteration) {
       const Instants instants(motion);
@@ -121,10 +124,10 @@ SweepFit fit_sweep(ComputeBackend& backend, std::span<const Eigen::Vector3d> poi
       double squared = 0.0;
       std::size_t paired = 0;
       for (std::size_t u = 0; u < used.size(); ++u) {
-        if (pairs[u].squared_distance_cm2 < 0.0f) continue;
+        if (pairs[u].squared_distance_cm2 < 0.0f || pairs[u].model_point < 0) continue;
         const Eigen::Vector3d matched = pairs[u].position_cm.cast<double>();
-        const Eigen::Vector3f in_model = (model_from_world * matched.homogeneous()).head<3>().cast<float>();
-        const Eigen::Vector3f* plane = model_normals.at(in_model);
+        // The plane of the model point's own cell (its coordinates as the model holds them).
+        const Eigen::Vector3f* plane = model_normals.at(model_points[static_cast<std::size_t>(pairs[u].model_point)]);
         if (plane == nullptr) continue;
         const Eigen::Vector3d n = model_to_world * plane->cast<double>();
         const double residual = n.dot(rotation * at_middle[u] + translation - matched);
@@ -146,12 +149,21 @@ SweepFit fit_sweep(ComputeBackend& backend, std::span<const Eigen::Vector3d> poi
       }
       fit.pairs = paired;
       fit.rms_cm = paired > 0 ? std::sqrt(squared / static_cast<double>(paired)) : 0.0;
-      if (paired < static_cast<std::size_t>(settings.min_pairs)) return fit;
+      if (paired < static_cast<std::size_t>(settings.min_pairs)) {
+        // A part of the sweep that sees too little of the model (the middle facing the vehicle)
+        // leaves the fit where it is; the next stage sees more. The last stage fails.
+        if (!last) break;
+        fit.motion = se3_exp(motion);
+        return fit;
+      }
       // A direction no pair measures gets no motion (point_to_plane.cpp's damping).
       Eigen::Matrix<double, kUnknowns, kUnknowns> damped = normal;
       damped.diagonal() += 1e-6 * normal.diagonal();
       const Eigen::Matrix<double, kUnknowns, 1> step = damped.ldlt().solve(-gradient);
-      if (!step.allFinite()) return fit;
+      if (!step.allFinite()) {
+        fit.motion = se3_exp(motion);
+        return fit;
+      }
       const std::array<Pose, 3> before = ends_of(fit.world_from_sweep, motion);
       fit.world_from_sweep = orthonormalised(fit.world_from_sweep * se3_exp(step.head<6>()));
       motion += step.tail<6>();

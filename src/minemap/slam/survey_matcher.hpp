@@ -143,14 +143,15 @@ class SurveyMatcher {
   /// Scan i registered: where it is the MotionSettings::first_sweep_rematch_scans-th sweep, the
   /// first sweep is matched again against sweeps 1..i (one tree over their model points), and
   /// sweeps 1..i move rigidly to where each trusted match puts them. Scan 0 stays. Its deskew: its
-  /// own motion fitted against them (fit_first_sweep), matched once from the fit's pose; else the
-  /// step into sweep 1 as it stands, up to kFirstSweepRounds times while the match moves them.
+  /// own motion fitted against them (fit_first_sweep), matched once from the fit's pose; where that
+  /// fit or its match fails, the step into sweep 1 as it stands, up to kFirstSweepRounds times while
+  /// the match moves them. A note says which.
   void rematch_first_sweep(std::size_t i);
   static constexpr int kFirstSweepRounds = 3;
   /// The first sweep's pose and motion over the sweep fitted against `later` (the union of the
   /// sweeps after it, placed at `frame`) from scan 0's pose and `step_motion`
-  /// (registration/sweep_fit.hpp): nullopt where MotionSettings::first_sweep_fit is off, the sweep
-  /// has no times, or the fit did not converge.
+  /// (registration/sweep_fit.hpp): nullopt where MotionSettings::first_sweep_fit is off or the
+  /// sweep has no times; a fit that did not converge is not used (a note says so).
   std::optional<SweepFit> fit_first_sweep(const Scan& first, const SweepTiming& timing, const PreparedCloud& later,
                                           const Pose& frame, const Pose& step_motion);
   void relax(std::size_t newest, int budget);

@@ -124,40 +124,67 @@ void SurveyMatcher::rematch_first_sweep(std::size_t i) {
   const Pose step_motion = motion_.sweep_motion(state_, 0, state_.pose(0), 1);
   const std::optional<SweepFit> fit = fit_first_sweep(first, timing, *union_cloud, frame, step_motion);
   Pose shift = Pose::Identity();
-  int rounds = 0;
-  for (int round = 0; round < kFirstSweepRounds; ++round) {
-    // Without a fit, each round deskews by the step into sweep 1 as the last round left it.
-    const Pose motion = fit ? fit->motion : motion_.sweep_motion(state_, 0, state_.pose(0), 1);
-    const Pose start = fit ? fit->world_from_sweep * rigid_inverse(state_.points_from_file(0)) : state_.pose(0);
-    PreparedScan prepared = preparation_.prepare(first, control_, timing, motion);
-    const std::vector<WorldModel> models{{union_cloud.get(), shift * frame}};
-    const ScanMatch match = registration_.register_scan(prepared, start, [&](float, const Pose&) { return models; });
-    step1_iterations_ += match.iterations;
-    if (!match.ok() || match.health.doubtful()) break;
-    // Scan 0 was matched to where the later sweeps say it stands; they move so that it stays.
-    const Pose move = state_.pose(0) * rigid_inverse(match.kept().world_from_data);
-    for (const std::size_t j : later) state_.place(j, move * state_.pose(j));
-    state_.set_prepared(0, std::move(prepared));
-    shift = move * shift;
-    ++rounds;
-    if (fit || (translation_norm(move) < settings_.motion.refine_min_change_cm &&
-                rotation_angle_deg(move) < settings_.motion.refine_min_change_deg)) {
-      break;  // a fitted motion is the same in every round
+  // Rounds of the paper's ICP against them, deskewed by the fitted motion (one round: it is the
+  // same in every round) or by the step into sweep 1 as the last round left it.
+  const auto match_rounds = [&](const SweepFit* fitted) {
+    int rounds = 0;
+    for (int round = 0; round < kFirstSweepRounds; ++round) {
+      const Pose motion = fitted ? fitted->motion : motion_.sweep_motion(state_, 0, state_.pose(0), 1);
+      const Pose start = fitted ? fitted->world_from_sweep * rigid_inverse(state_.points_from_file(0)) : state_.pose(0);
+      PreparedScan prepared = preparation_.prepare(first, control_, timing, motion);
+      const std::vector<WorldModel> models{{union_cloud.get(), shift * frame}};
+      const ScanMatch match = registration_.register_scan(prepared, start, [&](float, const Pose&) { return models; });
+      step1_iterations_ += match.iterations;
+      if (!match.ok() || match.health.doubtful()) break;
+      // Scan 0 was matched to where the later sweeps say it stands; they move so that it stays.
+      const Pose move = state_.pose(0) * rigid_inverse(match.kept().world_from_data);
+      for (const std::size_t j : later) state_.place(j, move * state_.pose(j));
+      state_.set_prepared(0, std::move(prepared));
+      shift = move * shift;
+      ++rounds;
+      if (fitted || (translation_norm(move) < settings_.motion.refine_min_change_cm &&
+                     rotation_angle_deg(move) < settings_.motion.refine_min_change_deg)) {
+        break;
+      }
     }
-  }
-  if (rounds == 0) return;
-  char text[420];
-  const int length = std::snprintf(
+    return rounds;
+  };
+  const bool fitted = fit && fit->converged;
+  int rounds = fitted ? match_rounds(&*fit) : 0;
+  const bool fit_kept = rounds > 0;
+  if (!fit_kept) rounds = match_rounds(nullptr);  // no fit, or its match doubtful: the step's motion
+  char text[640];
+  int length = std::snprintf(
       text, sizeof text,
       "the first sweep (%s) was matched again against the %zu sweeps after it once they were in (%d round(s)); "
       "they moved together %.1f cm and turned %.2f deg about it",
       first.name.c_str(), i, rounds, translation_norm(shift), rotation_angle_deg(shift));
-  if (fit && length > 0 && static_cast<std::size_t>(length) < sizeof text) {
-    std::snprintf(text + length, sizeof text - static_cast<std::size_t>(length),
-                  "; its own motion over the sweep, fitted against them, turned %.1f deg and moved %.1f cm (the "
-                  "step into sweep 1 said %.1f deg, %.1f cm)",
+  if (rounds == 0) {
+    length = std::snprintf(text, sizeof text,
+                           "the first sweep (%s) was matched again against the %zu sweeps after it once they were "
+                           "in, and no match was trusted: they stay where they were",
+                           first.name.c_str(), i);
+  }
+  const auto append = [&](const std::string& more) {
+    if (length > 0 && static_cast<std::size_t>(length) + more.size() < sizeof text) {
+      std::snprintf(text + length, sizeof text - static_cast<std::size_t>(length), "%s", more.c_str());
+    }
+  };
+  char more[320];
+  if (fit_kept) {
+    std::snprintf(more, sizeof more,
+                  "; its own motion over the sweep, fitted against them, turned %.1f deg and moved %.1f cm (the step "
+                  "into sweep 1 said %.1f deg, %.1f cm)",
                   rotation_angle_deg(fit->motion), translation_norm(fit->motion), rotation_angle_deg(step_motion),
                   translation_norm(step_motion));
+    append(more);
+  } else if (fit) {
+    std::snprintf(more, sizeof more,
+                  "; its own motion over the sweep %s (%zu pairs with a plane, %d iterations), so it was deskewed "
+                  "by the step into sweep 1",
+                  fitted ? "was fitted, but the match from there was not trusted" : "could not be fitted against them",
+                  fit->pairs, fit->iterations);
+    append(more);
   }
   notes_.emplace_back(text);
 }
@@ -175,10 +202,8 @@ std::optional<SweepFit> SurveyMatcher::fit_first_sweep(const Scan& first, const 
   const SurfaceNormals normals(later.points(), settings_.plane_cell_cm);
   SweepFitSettings fit_settings;
   fit_settings.max_pair_dist_cm = settings_.pairwise_icp().max_pair_dist_cm;
-  const SweepFit fit = fit_sweep(backend_, points, timing.fraction, WorldModel{&later, frame}, normals,
-                                 state_.pose(0) * state_.points_from_file(0), step_motion, fit_settings);
-  if (!fit.converged) return std::nullopt;
-  return fit;
+  return fit_sweep(backend_, points, timing.fraction, WorldModel{&later, frame}, normals,
+                   state_.pose(0) * state_.points_from_file(0), step_motion, fit_settings);
 }
 
 }  // namespace minemap::detail
