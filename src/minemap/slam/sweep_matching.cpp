@@ -1,8 +1,9 @@
 // A moving sensor's sweeps, after their first match (SurveyMatcher's, slam/survey_matcher.hpp):
 // deskewed again by the step the match found and matched again (refine_deskew), judged over the
 // recent sweeps for turns their surfaces cannot pin (doubt_unpinned_turn), and the first sweep, the
-// survey's frame, matched again once the sweeps after it are in (rematch_first_sweep). Not in the
-// paper: its scanner stood still while it scanned.
+// survey's frame, matched again once the sweeps after it are in, its own motion over the sweep
+// fitted against them first (rematch_first_sweep, fit_first_sweep; registration/sweep_fit.hpp).
+// Not in the paper: its scanner stood still while it scanned.
 #include <cmath>
 #include <cstdio>
 #include <vector>
