@@ -73,13 +73,13 @@ double rotation_angle_deg(const Pose& pose) {
   return std::acos(cos_angle) * kDegPerRad;
 }
 
-namespace {
-
 Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
   Eigen::Matrix3d m;
   m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
   return m;
 }
+
+namespace {
 
 /// SE(3)'s left Jacobian V(omega): t = V * rho. Series near zero, where the closed form cancels.
 Eigen::Matrix3d left_jacobian(const Eigen::Vector3d& omega) {

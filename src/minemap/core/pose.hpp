@@ -35,6 +35,8 @@ inline double translation_norm(const Pose& pose) { return pose.block<3, 1>(0, 3)
 /// A rigid motion as a twist (rotation vector in radians, then translation in the pose's unit),
 /// SE(3)'s logarithm: exp(log(T)) = T. For rotation angles below pi.
 using Twist = Eigen::Matrix<double, 6, 1>;
+/// [v]x, the cross product as a matrix: skew(v) * p = v x p.
+Eigen::Matrix3d skew(const Eigen::Vector3d& v);
 Twist se3_log(const Pose& pose);
 Pose se3_exp(const Twist& twist);
 

@@ -26,12 +26,6 @@ int instant_of(float fraction) {
   return static_cast<int>(std::lround(f * kInstants));
 }
 
-Eigen::Matrix3d cross_matrix(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d m;
-  m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
-  return m;
-}
-
 // The motion from each instant to the sweep's middle, exp(f xi), and its derivatives by the twist
 // at that instant (rows: x, y, z; the last column acts on the point's 1).
 struct Instants {
@@ -134,7 +128,7 @@ SweepFit fit_sweep(ComputeBackend& backend, std::span<const Eigen::Vector3d> poi
         // d x / d(middle's twist), then d x / d(motion's twist) = f d x / d(the instant's twist).
         Eigen::Matrix<double, 1, kUnknowns> row;
         const Eigen::RowVector3d n_rotated = n.transpose() * rotation;
-        row.segment<3>(0) = -n_rotated * cross_matrix(at_middle[u]);
+        row.segment<3>(0) = -n_rotated * skew(at_middle[u]);
         row.segment<3>(3) = n_rotated;
         const std::size_t k = static_cast<std::size_t>(instant[used[u]]);
         const double f = instant_fraction(instant[used[u]]);

@@ -59,11 +59,9 @@ Eigen::Vector3d placed(const Pose& pose, const Eigen::Vector3d& point) {
 
 /// d(T Exp(dx) p)/d(dx) at dx = 0: [R, -R [p]x].
 Eigen::Matrix<double, 3, 6> point_jacobian(const Pose& pose, const Eigen::Vector3d& p) {
-  Eigen::Matrix3d cross;
-  cross << 0, -p.z(), p.y(), p.z(), 0, -p.x(), -p.y(), p.x(), 0;
   Eigen::Matrix<double, 3, 6> jacobian;
   jacobian.leftCols<3>() = pose.block<3, 3>(0, 0);
-  jacobian.rightCols<3>() = -pose.block<3, 3>(0, 0) * cross;
+  jacobian.rightCols<3>() = -pose.block<3, 3>(0, 0) * skew(p);
   return jacobian;
 }
 

@@ -6,6 +6,7 @@
 // Not in the paper: its scanner stood still while it scanned.
 #include <cmath>
 #include <cstdio>
+#include <string>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -154,40 +155,35 @@ void SurveyMatcher::rematch_first_sweep(std::size_t i) {
   int rounds = fitted ? match_rounds(&*fit) : 0;
   const bool fit_kept = rounds > 0;
   if (!fit_kept) rounds = match_rounds(nullptr);  // no fit, or its match doubtful: the step's motion
-  char text[640];
-  int length = std::snprintf(
-      text, sizeof text,
-      "the first sweep (%s) was matched again against the %zu sweeps after it once they were in (%d round(s)); "
-      "they moved together %.1f cm and turned %.2f deg about it",
-      first.name.c_str(), i, rounds, translation_norm(shift), rotation_angle_deg(shift));
-  if (rounds == 0) {
-    length = std::snprintf(text, sizeof text,
-                           "the first sweep (%s) was matched again against the %zu sweeps after it once they were "
-                           "in, and no match was trusted: they stay where they were",
-                           first.name.c_str(), i);
+  char text[320];
+  if (rounds > 0) {
+    std::snprintf(text, sizeof text,
+                  "the first sweep (%s) was matched again against the %zu sweeps after it once they were in (%d "
+                  "round(s)); they moved together %.1f cm and turned %.2f deg about it",
+                  first.name.c_str(), i, rounds, translation_norm(shift), rotation_angle_deg(shift));
+  } else {
+    std::snprintf(text, sizeof text,
+                  "the first sweep (%s) was matched again against the %zu sweeps after it once they were in, and no "
+                  "match was trusted: they stay where they were",
+                  first.name.c_str(), i);
   }
-  const auto append = [&](const std::string& more) {
-    if (length > 0 && static_cast<std::size_t>(length) + more.size() < sizeof text) {
-      std::snprintf(text + length, sizeof text - static_cast<std::size_t>(length), "%s", more.c_str());
-    }
-  };
-  char more[320];
+  std::string note = text;
   if (fit_kept) {
-    std::snprintf(more, sizeof more,
+    std::snprintf(text, sizeof text,
                   "; its own motion over the sweep, fitted against them, turned %.1f deg and moved %.1f cm (the step "
                   "into sweep 1 said %.1f deg, %.1f cm)",
                   rotation_angle_deg(fit->motion), translation_norm(fit->motion), rotation_angle_deg(step_motion),
                   translation_norm(step_motion));
-    append(more);
+    note += text;
   } else if (fit) {
-    std::snprintf(more, sizeof more,
+    std::snprintf(text, sizeof text,
                   "; its own motion over the sweep %s (%zu pairs with a plane, %d iterations), so it was deskewed "
                   "by the step into sweep 1",
                   fitted ? "was fitted, but the match from there was not trusted" : "could not be fitted against them",
                   fit->pairs, fit->iterations);
-    append(more);
+    note += text;
   }
-  notes_.emplace_back(text);
+  notes_.push_back(std::move(note));
 }
 
 std::optional<SweepFit> SurveyMatcher::fit_first_sweep(const Scan& first, const SweepTiming& timing,
