@@ -323,6 +323,52 @@ TEST(MappingLoops, AMisclosureBeyondTheLimitMakesTheLoopsScanDoubtful) {
   for (std::size_t k = 0; k < mapped.scans.size(); ++k) EXPECT_EQ(mapped.scans[k].pose_cm, strict.scans[k].pose_cm);
 }
 
+// A loop match is an edge only when its turn of the later scan is one drift could make
+// (loops.max_turn_deg_per_100m): a corridor seen the other way fits as well as the right place. The
+// stop-and-go loop's right match turns its scan a fraction of a degree and is kept at the default;
+// with the limit at half its turn it is refused, says so, and no loop edge turns the scan that far.
+TEST(MappingLoops, ALoopMatchThatTurnsItsScanFasterThanDriftCanIsNotAnEdge) {
+  const auto survey = loop_survey_80m();
+  CpuBackend cpu;
+  MappingSettings settings;
+  const auto mapped = map_survey(survey.scans, settings, cpu);
+  const LoopClosure* closed = nullptr;
+  for (const LoopClosure& loop : mapped.loops) closed = loop.closed ? &loop : closed;
+  ASSERT_NE(closed, nullptr);
+  const double per_100m = closed->gap_before_deg / (closed->path_cm / 10000.0);
+  std::printf("the loop from %s to %s turned its scan %.3f deg over %.1f m (%.3f deg per 100 m)\n",
+              mapped.scans[closed->from].name.c_str(), mapped.scans[closed->to].name.c_str(), closed->gap_before_deg,
+              closed->path_cm / 100.0, per_100m);
+  EXPECT_GT(closed->gap_before_deg, 0.0);
+  EXPECT_LT(per_100m, 0.1 * settings.loops.max_turn_deg_per_100m);
+  EXPECT_TRUE(mapped.doubtful().empty());
+
+  settings.loops.max_turn_deg_per_100m = 0.5 * per_100m;
+  const auto strict = map_survey(survey.scans, settings, cpu);
+  bool refused = false;
+  for (const LoopClosure& loop : strict.loops) {
+    if (loop.closed) {
+      EXPECT_LE(loop.gap_before_deg, settings.loops.max_turn_deg_per_100m * loop.path_cm / 10000.0);
+      continue;
+    }
+    if (loop.from == closed->from && loop.to == closed->to) {
+      refused = true;
+      EXPECT_NE(loop.doubt.find("the match turned it"), std::string::npos) << loop.doubt;
+      EXPECT_NE(loop.doubt.find("deg per 100 m"), std::string::npos) << loop.doubt;
+    }
+  }
+  EXPECT_TRUE(refused);
+  // Refused and nothing else closed: the return is named, its drift unmeasured.
+  const bool any_closed = std::any_of(strict.loops.begin(), strict.loops.end(), [](const LoopClosure& l) { return l.closed; });
+  if (!any_closed) {
+    ASSERT_FALSE(strict.doubtful().empty());
+    EXPECT_NE(strict.scans[strict.doubtful().back()].health.doubt.find("the match turned it"), std::string::npos);
+  }
+  MappingSettings bad;
+  bad.loops.max_turn_deg_per_100m = -1.0;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+}
+
 // A spinning LiDAR's loop at 10 m/s around the pillars (turns of up to 50 deg within one sweep):
 // once mapped with exit 0 and 2 % of its drive off. Now the loop that closed 95 cm apart says so,
 // and with loop matches kept to 30 cm (none trusted) the unclosed return says so.

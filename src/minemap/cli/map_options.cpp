@@ -314,6 +314,8 @@ void MapOptionTable::declare_loops(MapOptions& map, MappingSettings& mapping) {
          "...of at most this many visits to its place: its own, the first, the next nearest in the drive (0 = all)");
   number(g, "--loop-max-misclosure-fraction", loops.max_misclosure_fraction,
          "A loop that closes further apart than this fraction of its drive makes its scan doubtful (0 = never)");
+  number(g, "--loop-max-turn-deg-per-100m", loops.max_turn_deg_per_100m,
+         "A loop match that turns its scan more than this per 100 m of drive is not closed (0 = never)");
   number(g, "--graph-translation-sigma-cm", loops.graph.translation_sigma_cm, "Pose graph: one edge's sigma (cm)");
   number(g, "--graph-rotation-sigma-rad", loops.graph.rotation_sigma_rad, "Pose graph: one edge's sigma (rad)");
   number(g, "--graph-max-iterations", loops.graph.max_iterations, "Pose graph: Gauss-Newton iterations at most");

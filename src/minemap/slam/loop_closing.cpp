@@ -153,6 +153,22 @@ std::optional<Pose> LoopClosing::agreeing(const Pose& matched, const Pose& start
   return std::nullopt;
 }
 
+std::optional<Pose> LoopClosing::within_turn(const Pose& matched, const Pose& start, bool carried, LoopClosure& loop,
+                                             bool& converged) const {
+  const double per_100m = settings_.loops.max_turn_deg_per_100m;
+  const double most_deg = per_100m * loop.path_cm / 10000.0;
+  const double turn_deg = rotation_angle_deg(rigid_inverse(start) * matched);
+  if (!(per_100m > 0.0) || !(turn_deg > most_deg)) return matched;
+  char text[300];
+  std::snprintf(text, sizeof text,
+                "the match turned it %.1f deg from where %s put it, more than %g deg per 100 m over the %.0f m of "
+                "drive between (%.1f deg): a corridor seen the other way, or a look-alike place",
+                turn_deg, carried ? "the loops closed before" : "the chain", per_100m, loop.path_cm / 100.0, most_deg);
+  loop.doubt = text;
+  converged = true;
+  return std::nullopt;
+}
+
 void LoopClosing::carry(std::vector<Pose>& guess, std::size_t from, std::size_t to, const Pose& from_to) {
   // Orthonormalised: rigid_inverse transposes, so a rotation part a round-off away from orthonormal
   // comes back from it scaled the wrong way, and the move passes that on to every later guess. Loop
@@ -239,6 +255,7 @@ std::vector<LoopClosure> LoopClosing::close(SurveyState& state, RunControl& cont
                                  : poses[loop.to];
       bool converged = false;
       std::optional<Pose> matched = loop_match(state, loop.from, loop.to, start, loop.doubt, converged);
+      if (matched) matched = within_turn(*matched, start, carried, loop, converged);
       if (matched && carried) matched = agreeing(*matched, start, loop, converged);
       if (!matched && converged && !unclosed) unclosed = loop;
       if (matched) {

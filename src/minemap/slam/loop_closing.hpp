@@ -75,6 +75,12 @@ class LoopClosing {
   /// a wrong start, and one carried edge would take every later lap with it; otherwise empty, with
   /// `loop.doubt` saying so and `converged` set.
   std::optional<Pose> agreeing(const Pose& matched, const Pose& start, LoopClosure& loop, bool& converged) const;
+  /// A loop match that turns `loop.to` more than loops.max_turn_deg_per_100m (per 100 m of the
+  /// loop's drive) from `start` (where the chain, or the loops closed before when `carried`, put it):
+  /// empty, with `loop.doubt` saying so and `converged` set; else `matched`. No drift turns a map
+  /// that fast; a corridor seen the other way fits as well as the right place.
+  std::optional<Pose> within_turn(const Pose& matched, const Pose& start, bool carried, LoopClosure& loop,
+                                  bool& converged) const;
   /// A return none of whose candidates closed, where a match converged but was not trusted: the
   /// map's drift over the loop stays, unmeasured; the return's scan is judged doubtful.
   void doubt_unclosed_return(SurveyState& state, const LoopClosure& loop) const;

@@ -202,6 +202,9 @@ void LoopClosureSettings::validate() const {
   if (!(max_misclosure_fraction >= 0.0) || !std::isfinite(max_misclosure_fraction)) {
     throw std::invalid_argument("a loop's largest misclosure must be a finite fraction >= 0 of its drive");
   }
+  if (!(max_turn_deg_per_100m >= 0.0) || !std::isfinite(max_turn_deg_per_100m)) {
+    throw std::invalid_argument("a loop match's largest turn must be a finite number >= 0 of degrees per 100 m");
+  }
   if (!(graph.translation_sigma_cm > 0.0) || !(graph.rotation_sigma_rad > 0.0) || graph.max_iterations < 1) {
     throw std::invalid_argument("the pose graph needs sigmas > 0 and at least one iteration");
   }
