@@ -166,7 +166,8 @@ struct Row {
 
 std::vector<Row> reader_rows() {
   std::vector<Row> rows;
-  const auto line = [](std::size_t n) { return ":" + std::to_string(n) + ":"; };
+  // Appended, not ":" + to_string(n): GCC 12 warns (-Wrestrict) about that temporary's insert.
+  const auto line = [](std::size_t n) { return std::string(":").append(std::to_string(n)).append(":"); };
   const auto byte = [](std::size_t n) { return "@byte " + std::to_string(n) + ":"; };
   io::ReadSettings two_points;
   two_points.max_points = 2;
