@@ -174,6 +174,66 @@ TEST(SweepFit, FindsTheMiddlesPoseAndTheMotionOverASweepThatTurned30Deg) {
   EXPECT_EQ(same.iterations, fit.iterations);
 }
 
+// A fit whose pairs change by a few each iteration wanders about where it has settled and may never
+// step under the least steps: at its last stage's cap it has converged where its last iterations
+// all moved less than the settled steps (SweepFitSettings::settle_iterations). Least steps of 0 stand
+// for such churn here: no stage converges, the last settles, as close as the converged fit.
+TEST(SweepFit, AFitThatOnlyWandersAtItsLastStagesCapHasSettled) {
+  const Chamber chamber;
+  const Pose world_from_model = pose_of(-20.0, 1.0, {3000.0, -1200.0, 40.0});
+  std::vector<Eigen::Vector3d> model_points;
+  for (const Eigen::Vector3d& p : chamber.grid(8.0)) model_points.push_back((rigid_inverse(world_from_model) * p.homogeneous()).head<3>());
+  const Pose middle = pose_of(10.0, 2.0, {50.0, -30.0, 20.0});
+  const Pose motion = se3_exp((Twist() << 0.02, -0.01, 30.0 * kRadPerDeg, 80.0, 10.0, -3.0).finished());
+  const Sweep sweep = sweep_of(chamber.random(1500, 7), middle, motion);
+  const Pose start = middle * pose_of(3.0, -0.5, {10.0, -8.0, 3.0});
+  const Pose start_motion = se3_exp(0.35 * se3_log(motion));
+  auto cpu = make_cpu_backend();
+  const Model model = model_on(*cpu, model_points);
+  const auto run = [&](const SweepFitSettings& settings) {
+    return fit_sweep(*cpu, sweep.points_cm, sweep.fractions, WorldModel{model.cloud.get(), world_from_model},
+                     model.normals, start, start_motion, settings);
+  };
+  SweepFitSettings never;
+  never.min_translation_step_cm = 0.0;
+  never.min_rotation_step_deg = 0.0;
+  never.max_iterations = 12;
+  const SweepFit settled = run(never);
+  const Pose middle_off = rigid_inverse(middle) * settled.world_from_sweep;
+  const Pose motion_off = rigid_inverse(motion) * settled.motion;
+  std::printf("settled after %d iterations: middle off %.3f cm %.4f deg, motion off %.3f cm %.4f deg\n",
+              settled.iterations, translation_norm(middle_off), rotation_angle_deg(middle_off),
+              translation_norm(motion_off), rotation_angle_deg(motion_off));
+  EXPECT_TRUE(settled.converged);
+  EXPECT_TRUE(settled.settled);
+  EXPECT_EQ(settled.iterations, 4 * never.max_iterations);
+  EXPECT_LT(translation_norm(middle_off), 0.5);
+  EXPECT_LT(rotation_angle_deg(middle_off), 0.05);
+  EXPECT_LT(rotation_angle_deg(motion_off), 0.1);
+  const SweepFit converged = run(SweepFitSettings{});  // converges to the least steps: not "settled"
+  EXPECT_TRUE(converged.converged);
+  EXPECT_FALSE(converged.settled);
+
+  SweepFitSettings off = never;
+  off.settle_iterations = 0;
+  const SweepFit unsettled = run(off);
+  EXPECT_FALSE(unsettled.converged);
+  EXPECT_FALSE(unsettled.settled);
+  EXPECT_EQ(unsettled.world_from_sweep, settled.world_from_sweep);  // the same fit, judged otherwise
+  SweepFitSettings tight = never;
+  tight.settled_step_cm = 1e-9;
+  EXPECT_FALSE(run(tight).converged);
+  SweepFitSettings longer = never;
+  longer.settle_iterations = never.max_iterations + 1;  // more than the stage ran
+  EXPECT_FALSE(run(longer).converged);
+  SweepFitSettings bad;
+  bad.settle_iterations = -1;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+  bad = SweepFitSettings{};
+  bad.settled_step_deg = -0.1;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+}
+
 // A sweep with no model around it fails the fit (too few pairs), and says so; bad settings and
 // inputs are refused.
 TEST(SweepFit, ASweepOutOfTheModelsReachFailsAndBadSettingsAreRefused) {

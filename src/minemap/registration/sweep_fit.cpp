@@ -47,10 +47,18 @@ struct Instants {
   }
 };
 
-bool small_change(const Pose& before, const Pose& after, const SweepFitSettings& settings) {
+bool small_change(const Pose& before, const Pose& after, double translation_cm, double rotation_deg) {
   const Pose change = rigid_inverse(before) * after;
-  return translation_norm(change) < settings.min_translation_step_cm &&
-         rotation_angle_deg(change) < settings.min_rotation_step_deg;
+  return translation_norm(change) < translation_cm && rotation_angle_deg(change) < rotation_deg;
+}
+
+// Whether each of the start, middle and end moved less than the given step.
+bool all_small(const std::array<Pose, 3>& before, const std::array<Pose, 3>& after, double translation_cm,
+               double rotation_deg) {
+  for (std::size_t e = 0; e < 3; ++e) {
+    if (!small_change(before[e], after[e], translation_cm, rotation_deg)) return false;
+  }
+  return true;
 }
 
 // The sweep's start, middle and end in the world.
@@ -69,6 +77,9 @@ void SweepFitSettings::validate() const {
   }
   if (!(min_translation_step_cm >= 0.0) || !(min_rotation_step_deg >= 0.0)) {
     throw std::invalid_argument("sweep fit: the least steps must be >= 0");
+  }
+  if (!(settled_step_cm >= 0.0) || !(settled_step_deg >= 0.0) || settle_iterations < 0) {
+    throw std::invalid_argument("sweep fit: the settled steps and iterations must be >= 0");
   }
 }
 
@@ -97,6 +108,7 @@ SweepFit fit_sweep(ComputeBackend& backend, std::span<const Eigen::Vector3d> poi
     }
     const bool last = stage == settings.stages;
     bool converged = false;
+    int settled_for = 0;  // how many iterations in a row moved less than the settled steps
     for (int iteration = 0; iteration < settings.max_iterations && !converged; ++iteration) {
       const Instants instants(motion);
       const Eigen::Matrix3d rotation = fit.world_from_sweep.block<3, 3>(0, 0);
@@ -163,10 +175,13 @@ SweepFit fit_sweep(ComputeBackend& backend, std::span<const Eigen::Vector3d> poi
       motion += step.tail<6>();
       ++fit.iterations;
       const std::array<Pose, 3> after = ends_of(fit.world_from_sweep, motion);
-      converged = small_change(before[0], after[0], settings) && small_change(before[1], after[1], settings) &&
-                  small_change(before[2], after[2], settings);
+      converged = all_small(before, after, settings.min_translation_step_cm, settings.min_rotation_step_deg);
+      settled_for = all_small(before, after, settings.settled_step_cm, settings.settled_step_deg) ? settled_for + 1 : 0;
     }
-    fit.converged = converged;  // an earlier stage may end unconverged: the next goes on from there
+    // An earlier stage may end unconverged: the next goes on from there. The last, at its cap, may
+    // have settled (the pairs' churn), which is as far as its pairs take it.
+    fit.settled = last && !converged && settings.settle_iterations > 0 && settled_for >= settings.settle_iterations;
+    fit.converged = converged || fit.settled;
   }
   fit.motion = se3_exp(motion);
   return fit;

@@ -35,7 +35,17 @@ struct SweepFitSettings {
   double min_translation_step_cm = 0.01;
   double min_rotation_step_deg = 0.001;  ///< ...and turns each less than this
   int min_pairs = 250;                   ///< fewer pairs with a plane: the fit fails
+  /// The last stage at its cap still converges where each of its last settle_iterations moved the
+  /// sweep's middle, start and end less than this and turned them less than settled_step_deg: the
+  /// pairs, found again each iteration, then change by a few at a time and the fit wanders by a
+  /// millimetre about where it has settled without ever stepping under the least steps above (a
+  /// -march=native build's FMA changed which of the simulated first sweeps did: 6 of 24 failed
+  /// there, none in the plain build; docs/benchmarks.md). 0 iterations: off.
+  double settled_step_cm = 0.5;
+  double settled_step_deg = 0.05;
+  int settle_iterations = 5;
   void validate() const;                 ///< throws std::invalid_argument
+  bool operator==(const SweepFitSettings&) const = default;
 };
 
 /// One sweep's fit (fit_sweep).
@@ -46,6 +56,7 @@ struct SweepFit {
   std::size_t pairs = 0;                     ///< the last iteration's pairs with a plane
   int iterations = 0;                        ///< over all stages
   bool converged = false;                    ///< the last stage (all of the sweep) converged with enough pairs
+  bool settled = false;                      ///< ...by SweepFitSettings::settle_iterations, at its cap
 };
 
 /// Fits a sweep's points (`points_cm`, its file frame; `fractions` one each, filter/deskew.hpp's

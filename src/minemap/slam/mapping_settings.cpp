@@ -163,6 +163,10 @@ void MotionSettings::validate() const {
   if (!(unpinned_turn_window_s > 0.0) || !std::isfinite(unpinned_turn_window_s)) {
     throw std::invalid_argument("the unpinned turn's window must be a finite number of seconds > 0");
   }
+  first_sweep_fit_settings.validate();
+  if (!(unfitted_first_sweep_max_turn_deg >= 0.0) || !std::isfinite(unfitted_first_sweep_max_turn_deg)) {
+    throw std::invalid_argument("the unfitted first sweep's largest turn must be a finite number >= 0 of degrees");
+  }
   if (first_sweep_rematch_scans < 0) {
     throw std::invalid_argument("the first sweep's second match comes after a number of sweeps >= 0 (0 = off)");
   }

@@ -128,6 +128,7 @@ void SurveyMatcher::rematch_first_sweep(std::size_t i) {
   Pose shift = Pose::Identity();
   // Rounds of the paper's ICP against them, deskewed by the fitted motion (one round: it is the
   // same in every round) or by the step into sweep 1 as the last round left it.
+  RegistrationHealth last_health;  // the first sweep's last match against them
   const auto match_rounds = [&](const SweepFit* fitted) {
     int rounds = 0;
     for (int round = 0; round < kFirstSweepRounds; ++round) {
@@ -137,6 +138,7 @@ void SurveyMatcher::rematch_first_sweep(std::size_t i) {
       const std::vector<WorldModel> models{{union_cloud.get(), shift * frame}};
       const ScanMatch match = registration_.register_scan(prepared, start, [&](float, const Pose&) { return models; });
       step1_iterations_ += match.iterations;
+      if (match.ok()) last_health = match.health;
       if (!match.ok() || match.health.doubtful()) break;
       // Scan 0 was matched to where the later sweeps say it stands; they move so that it stays.
       const Pose move = state_.pose(0) * rigid_inverse(match.kept().world_from_data);
@@ -170,8 +172,9 @@ void SurveyMatcher::rematch_first_sweep(std::size_t i) {
   std::string note = text;
   if (fit_kept) {
     std::snprintf(text, sizeof text,
-                  "; its own motion over the sweep, fitted against them, turned %.1f deg and moved %.1f cm (the step "
-                  "into sweep 1 said %.1f deg, %.1f cm)",
+                  "; its own motion over the sweep, fitted against them%s, turned %.1f deg and moved %.1f cm (the "
+                  "step into sweep 1 said %.1f deg, %.1f cm)",
+                  fit->settled ? " (settled within the pairs' churn at its last stage's cap)" : "",
                   rotation_angle_deg(fit->motion), translation_norm(fit->motion), rotation_angle_deg(step_motion),
                   translation_norm(step_motion));
     note += text;
@@ -184,6 +187,25 @@ void SurveyMatcher::rematch_first_sweep(std::size_t i) {
     note += text;
   }
   notes_.push_back(std::move(note));
+  doubt_unfitted_first_sweep(fit, fit_kept, step_motion, i, std::move(last_health));
+}
+
+void SurveyMatcher::doubt_unfitted_first_sweep(const std::optional<SweepFit>& fit, bool fit_kept,
+                                               const Pose& step_motion, std::size_t later,
+                                               RegistrationHealth health) {
+  const double turned_deg = rotation_angle_deg(step_motion);
+  if (!fit || fit_kept || !(turned_deg > settings_.motion.unfitted_first_sweep_max_turn_deg)) return;
+  char text[480];
+  std::snprintf(text, sizeof text,
+                "its own motion over the sweep %s against the %zu sweeps after it, and the step into sweep 1 turned "
+                "the sensor %.1f deg over one sweep (more than %g): deskewed by that step, its shape, and with it "
+                "the frame of the whole map, may be off by part of that turn; check it, or start the survey with "
+                "the sensor still",
+                fit->converged ? "was fitted, but the match from there was not trusted," : "could not be fitted",
+                later, turned_deg, settings_.motion.unfitted_first_sweep_max_turn_deg);
+  health.judged = true;  // its last match's figures, where one was made
+  health.doubt = health.doubt.empty() ? std::string(text) : health.doubt + "; " + text;
+  state_.judged(0, std::move(health));
 }
 
 std::optional<SweepFit> SurveyMatcher::fit_first_sweep(const Scan& first, const SweepTiming& timing,
@@ -197,7 +219,7 @@ std::optional<SweepFit> SurveyMatcher::fit_first_sweep(const Scan& first, const 
     points[k] = (file_from_points * first.points_cm[k].cast<double>().homogeneous()).head<3>();
   }
   const SurfaceNormals normals(later.points(), settings_.plane_cell_cm);
-  SweepFitSettings fit_settings;
+  SweepFitSettings fit_settings = settings_.motion.first_sweep_fit_settings;
   fit_settings.max_pair_dist_cm = settings_.pairwise_icp().max_pair_dist_cm;
   return fit_sweep(backend_, points, timing.fraction, WorldModel{&later, frame}, normals,
                    state_.pose(0) * state_.points_from_file(0), step_motion, fit_settings);
