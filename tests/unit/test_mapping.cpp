@@ -297,6 +297,13 @@ TEST(MappingDeterminism, BitIdenticalPosesRunToRunAndForOneOrTwoThreads) {
   }
 }
 
+// The last loop the run closed, or nullptr.
+const LoopClosure* last_closed(const MappingResult& mapped) {
+  const LoopClosure* closed = nullptr;
+  for (const LoopClosure& loop : mapped.loops) closed = loop.closed ? &loop : closed;
+  return closed;
+}
+
 // A closed loop states its misclosure (the gap before the relaxation, against the drive between),
 // and one beyond loops.max_misclosure_fraction makes its later scan doubtful: the chain was that
 // far off. The stop-and-go loop closes 0.06 % apart: trusted at the default 1 %, doubtful at 0.03 %.
@@ -305,8 +312,7 @@ TEST(MappingLoops, AMisclosureBeyondTheLimitMakesTheLoopsScanDoubtful) {
   CpuBackend cpu;
   MappingSettings settings;
   const auto mapped = map_survey(survey.scans, settings, cpu);
-  const LoopClosure* closed = nullptr;
-  for (const LoopClosure& loop : mapped.loops) closed = loop.closed ? &loop : closed;
+  const LoopClosure* closed = last_closed(mapped);
   ASSERT_NE(closed, nullptr);
   EXPECT_GT(closed->path_cm, 5000.0);
   EXPECT_LT(closed->gap_before_cm, 0.01 * closed->path_cm);
@@ -332,8 +338,7 @@ TEST(MappingLoops, ALoopMatchThatTurnsItsScanFasterThanDriftCanIsNotAnEdge) {
   CpuBackend cpu;
   MappingSettings settings;
   const auto mapped = map_survey(survey.scans, settings, cpu);
-  const LoopClosure* closed = nullptr;
-  for (const LoopClosure& loop : mapped.loops) closed = loop.closed ? &loop : closed;
+  const LoopClosure* closed = last_closed(mapped);
   ASSERT_NE(closed, nullptr);
   const double per_100m = closed->gap_before_deg / (closed->path_cm / 10000.0);
   std::printf("the loop from %s to %s turned its scan %.3f deg over %.1f m (%.3f deg per 100 m)\n",

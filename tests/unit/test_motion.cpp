@@ -835,6 +835,17 @@ TEST(MovingMapping, TheFirstSweepMatchedAgainstTheSweepsAfterItTurnsTheMapRight)
   expect_rejected([](MappingSettings& s, double v) { s.motion.first_sweep_rematch_scans = int(v); }, {-1.0});
 }
 
+// The simulated spinning loop of seed 2 (80 m, 10 m/s), its first 22 sweeps: it starts in a corner,
+// its first sweep turning 43 deg while it is taken, where the step into sweep 1 says 12.
+sim::MovingSimulationSettings corner_loop_start() {
+  sim::MovingSimulationSettings simulation;
+  simulation.sensor = sim::MovingSensor::kSpinning;
+  simulation.mine.loop_length_cm = 8000.0;
+  simulation.mine.seed = 2;
+  simulation.sweeps = 22;
+  return simulation;
+}
+
 // The simulated spinning loop (seed 2) starts in a corner at 10 m/s: its first sweep turned 43 deg
 // while it was taken, slowing from 600 to 250 deg/s, where the step into sweep 1 says 12. Deskewed
 // by that step, the first sweep is bent, and matched again it leaves the map turned 2.4-6.2 deg about
@@ -846,11 +857,7 @@ TEST(MovingMapping, TheFirstSweepMatchedAgainstTheSweepsAfterItTurnsTheMapRight)
 // clang's builds (the sanitizer runs) do not converge here (docs/benchmarks.md), the same sweeps
 // stored about another origin converge there.
 TEST(MovingMapping, TheFirstSweepsOwnMotionFittedTurnsTheMapOfALoopStartingInACornerRight) {
-  sim::MovingSimulationSettings simulation;
-  simulation.sensor = sim::MovingSensor::kSpinning;
-  simulation.mine.loop_length_cm = 8000.0;
-  simulation.mine.seed = 2;
-  simulation.sweeps = 22;
+  sim::MovingSimulationSettings simulation = corner_loop_start();
   const sim::MovingSurvey survey = sim::simulate_moving_survey(simulation);
   CpuBackend cpu;
   const MappingSettings defaults;
@@ -913,11 +920,7 @@ TEST(MovingMapping, TheFirstSweepsOwnMotionFittedTurnsTheMapOfALoopStartingInACo
 // 12 deg turn; with the limit above that turn it is not. A straight drive's first step turns
 // 0.1 deg: its failed fit names nothing.
 TEST(MovingMapping, AFirstSweepWhoseOwnMotionIsNotFittedAndThatTurnedFastIsDoubtful) {
-  sim::MovingSimulationSettings simulation;
-  simulation.sensor = sim::MovingSensor::kSpinning;
-  simulation.mine.loop_length_cm = 8000.0;
-  simulation.mine.seed = 2;
-  simulation.sweeps = 22;
+  sim::MovingSimulationSettings simulation = corner_loop_start();
   const sim::MovingSurvey corner = sim::simulate_moving_survey(simulation);
   CpuBackend cpu;
   MappingSettings off;

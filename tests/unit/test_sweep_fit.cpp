@@ -102,20 +102,36 @@ Model model_on(ComputeBackend& backend, const std::vector<Eigen::Vector3d>& poin
   return {backend.prepare(std::move(cloud), KdTreeSettings{}), std::move(normals)};
 }
 
+// The chamber's sweep that turned 30 deg and moved 80 cm while it was taken, with the model in a
+// frame of its own (world_from_model, as the later sweeps' union is), and the start the step after
+// it would give (a third of the turn, the middle 3 deg and 13 cm off).
+struct TurnedSweep {
+  Chamber chamber;
+  Pose world_from_model = pose_of(-20.0, 1.0, {3000.0, -1200.0, 40.0});
+  std::vector<Eigen::Vector3d> model_points = in_model_frame(chamber.grid(8.0), world_from_model);
+  Pose middle = pose_of(10.0, 2.0, {50.0, -30.0, 20.0});
+  Pose motion = se3_exp((Twist() << 0.02, -0.01, 30.0 * kRadPerDeg, 80.0, 10.0, -3.0).finished());
+  Sweep sweep = sweep_of(chamber.random(1500, 7), middle, motion);
+  Pose start = middle * pose_of(3.0, -0.5, {10.0, -8.0, 3.0});
+  Pose start_motion = se3_exp(0.35 * se3_log(motion));
+
+  static std::vector<Eigen::Vector3d> in_model_frame(const std::vector<Eigen::Vector3d>& world, const Pose& world_from_model) {
+    std::vector<Eigen::Vector3d> model;
+    for (const Eigen::Vector3d& p : world) model.push_back((rigid_inverse(world_from_model) * p.homogeneous()).head<3>());
+    return model;
+  }
+};
+
 // A sweep that turned 30 deg and moved 80 cm while it was taken, started where the step after it
 // would put it (a third of the turn, the middle 3 deg and 13 cm off): the fit finds the middle's
 // pose and the motion. The model sits in a frame of its own (world_from_model), as the later
 // sweeps' union does. The same fit on the OpenCL backend gives the same bits.
 TEST(SweepFit, FindsTheMiddlesPoseAndTheMotionOverASweepThatTurned30Deg) {
-  const Chamber chamber;
-  const Pose world_from_model = pose_of(-20.0, 1.0, {3000.0, -1200.0, 40.0});
-  std::vector<Eigen::Vector3d> model_points;
-  for (const Eigen::Vector3d& p : chamber.grid(8.0)) model_points.push_back((rigid_inverse(world_from_model) * p.homogeneous()).head<3>());
-  const Pose middle = pose_of(10.0, 2.0, {50.0, -30.0, 20.0});
-  const Pose motion = se3_exp((Twist() << 0.02, -0.01, 30.0 * kRadPerDeg, 80.0, 10.0, -3.0).finished());
-  const Sweep sweep = sweep_of(chamber.random(1500, 7), middle, motion);
-  const Pose start = middle * pose_of(3.0, -0.5, {10.0, -8.0, 3.0});
-  const Pose start_motion = se3_exp(0.35 * se3_log(motion));
+  const TurnedSweep turned;
+  const Pose& world_from_model = turned.world_from_model;
+  const std::vector<Eigen::Vector3d>& model_points = turned.model_points;
+  const Pose &middle = turned.middle, &motion = turned.motion, &start = turned.start, &start_motion = turned.start_motion;
+  const Sweep& sweep = turned.sweep;
 
   auto cpu = make_cpu_backend();
   const Model model = model_on(*cpu, model_points);
@@ -179,15 +195,11 @@ TEST(SweepFit, FindsTheMiddlesPoseAndTheMotionOverASweepThatTurned30Deg) {
 // all moved less than the settled steps (SweepFitSettings::settle_iterations). Least steps of 0 stand
 // for such churn here: no stage converges, the last settles, as close as the converged fit.
 TEST(SweepFit, AFitThatOnlyWandersAtItsLastStagesCapHasSettled) {
-  const Chamber chamber;
-  const Pose world_from_model = pose_of(-20.0, 1.0, {3000.0, -1200.0, 40.0});
-  std::vector<Eigen::Vector3d> model_points;
-  for (const Eigen::Vector3d& p : chamber.grid(8.0)) model_points.push_back((rigid_inverse(world_from_model) * p.homogeneous()).head<3>());
-  const Pose middle = pose_of(10.0, 2.0, {50.0, -30.0, 20.0});
-  const Pose motion = se3_exp((Twist() << 0.02, -0.01, 30.0 * kRadPerDeg, 80.0, 10.0, -3.0).finished());
-  const Sweep sweep = sweep_of(chamber.random(1500, 7), middle, motion);
-  const Pose start = middle * pose_of(3.0, -0.5, {10.0, -8.0, 3.0});
-  const Pose start_motion = se3_exp(0.35 * se3_log(motion));
+  const TurnedSweep turned;
+  const Pose& world_from_model = turned.world_from_model;
+  const std::vector<Eigen::Vector3d>& model_points = turned.model_points;
+  const Pose &middle = turned.middle, &motion = turned.motion, &start = turned.start, &start_motion = turned.start_motion;
+  const Sweep& sweep = turned.sweep;
   auto cpu = make_cpu_backend();
   const Model model = model_on(*cpu, model_points);
   const auto run = [&](const SweepFitSettings& settings) {
