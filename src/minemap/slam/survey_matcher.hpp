@@ -151,15 +151,15 @@ class SurveyMatcher {
   /// The first sweep's pose and motion over the sweep fitted against `later` (the union of the
   /// sweeps after it, placed at `frame`) from scan 0's pose and `step_motion`
   /// (registration/sweep_fit.hpp): nullopt where MotionSettings::first_sweep_fit is off or the
-  /// sweep has no times; a fit that did not converge is not used (a note says so).
+  /// sweep has no times; a fit that did not converge (or settle) is not used (a note says so).
+  std::optional<SweepFit> fit_first_sweep(const Scan& first, const SweepTiming& timing, const PreparedCloud& later,
+                                          const Pose& frame, const Pose& step_motion);
   /// Where the first sweep's fit was tried and not kept, and the step into sweep 1 (`step_motion`)
   /// turned more than MotionSettings::unfitted_first_sweep_max_turn_deg: scan 0 is judged doubtful
   /// with `health` (its last match against the `later` sweeps after it; not judged: none made),
   /// naming the turn. The poses stay.
   void doubt_unfitted_first_sweep(const std::optional<SweepFit>& fit, bool fit_kept, const Pose& step_motion,
                                   std::size_t later, RegistrationHealth health);
-  std::optional<SweepFit> fit_first_sweep(const Scan& first, const SweepTiming& timing, const PreparedCloud& later,
-                                          const Pose& frame, const Pose& step_motion);
   void relax(std::size_t newest, int budget);
 
   const MappingSettings& settings_;
