@@ -244,7 +244,9 @@ TEST(Export, ASurveyInWorldCoordinatesMapsNearZeroAndExportsInItsOwnCoordinates)
       world.push_back(local.back() + offset_m);
     }
     for (const auto& [folder, points, wide] : {std::tuple{"local", &local, false}, std::tuple{"world", &world, true}}) {
-      io::PlyStreamWriter ply(dir / folder / (scan.name + ".ply"), {.double_coordinates = wide});
+      io::PlyStreamWriter::Layout layout;  // not designated: GCC 12 warns of the unnamed members
+      layout.double_coordinates = wide;
+      io::PlyStreamWriter ply(dir / folder / (scan.name + ".ply"), layout);
       ply.write(*points, {});
       ply.finish();
     }
