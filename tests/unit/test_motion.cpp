@@ -805,17 +805,22 @@ TEST(MovingMapping, ARosetteTurnedByItsPatternIsNamedAndItsTurnTakenOut) {
   EXPECT_EQ(unpinned(walked), 0u);
 }
 
+/// The first 25 sweeps of the simulated hand-held walk of seed 4.
+sim::MovingSurvey handheld_walk_of_seed_4() {
+  sim::MovingSimulationSettings simulation;
+  simulation.sensor = sim::MovingSensor::kHandheld;
+  simulation.sweeps = 25;
+  simulation.mine.seed = 4;
+  return sim::simulate_moving_survey(simulation);
+}
+
 // The simulated hand-held walk of seed 4: sweep 1's match against sweep 0 alone (one rosette
 // pattern, a turn about the view axis the surfaces hardly pin) is 6.4 deg off, and every later
 // pose keeps that turn. Matched again once 20 sweeps are in, sweep 0 says where they stand: the map
 // turns right, within half a degree; the sweeps after it keep their places relative to each other
 // (moved together), and sweep 0 stays where it was, the survey's frame.
 TEST(MovingMapping, TheFirstSweepMatchedAgainstTheSweepsAfterItTurnsTheMapRight) {
-  sim::MovingSimulationSettings simulation;
-  simulation.sensor = sim::MovingSensor::kHandheld;
-  simulation.sweeps = 25;
-  simulation.mine.seed = 4;
-  const sim::MovingSurvey survey = sim::simulate_moving_survey(simulation);
+  const sim::MovingSurvey survey = handheld_walk_of_seed_4();
   CpuBackend cpu;
   const MappingSettings defaults;
   ASSERT_EQ(defaults.motion.first_sweep_rematch_scans, 20);
@@ -833,6 +838,47 @@ TEST(MovingMapping, TheFirstSweepMatchedAgainstTheSweepsAfterItTurnsTheMapRight)
   expect_moved_together(once, again, 20);
   EXPECT_TRUE(has_note(again, "matched again against the 20 sweeps"));
   expect_rejected([](MappingSettings& s, double v) { s.motion.first_sweep_rematch_scans = int(v); }, {-1.0});
+}
+
+// The spring to the prediction (MotionSettings::sweep_start_spring_pairs, off by default): a timed
+// sweep's matches from its prediction take it, keyframes without times do not (their outputs are
+// the same bits with it on). Its effect on drift is docs/benchmarks.md's, "A spring to the
+// prediction"; the mechanism's test is test_horn_icp.cpp's IcpStartSpring.
+TEST(MovingMapping, TheStartSpringHoldsTimedSweepsOnly) {
+  const sim::MovingSurvey survey = handheld_walk_of_seed_4();
+  CpuBackend cpu;
+  const MappingSettings off;
+  ASSERT_EQ(off.motion.sweep_start_spring_pairs, 0.0);
+  MappingSettings spring = off;
+  spring.motion.sweep_start_spring_pairs = 160.0;
+  const auto mean_off_cm = [&](const MappingResult& result) {
+    double sum = 0.0;
+    for (std::size_t k = 1; k < survey.truth_cm.size(); ++k) {
+      const Pose mapped = rigid_inverse(result.scans[0].pose_cm) * result.scans[k].pose_cm;
+      const Pose truth = rigid_inverse(survey.truth_cm[0]) * survey.truth_cm[k];
+      sum += translation_norm(rigid_inverse(truth) * mapped);
+    }
+    return sum / double(survey.truth_cm.size() - 1);
+  };
+  const MappingResult held = map_survey(survey.scans, spring, cpu);
+  const MappingResult free = map_survey(survey.scans, off, cpu);
+  ASSERT_TRUE(held.all_registered());
+  ASSERT_TRUE(free.all_registered());
+  std::printf("hand-held, 25 sweeps: %.2f cm from the truth with the spring, %.2f cm without\n", mean_off_cm(held),
+              mean_off_cm(free));
+  bool differ = false;
+  for (std::size_t k = 1; k < held.scans.size(); ++k) differ = differ || held.scans[k].pose_cm != free.scans[k].pose_cm;
+  EXPECT_TRUE(differ) << "the timed sweeps' matches take the spring";
+  EXPECT_LT(mean_off_cm(held), 5.0);
+  // The same scans without their points' times: keyframes, matched without the spring.
+  std::vector<Scan> keyframes = survey.scans;
+  for (Scan& scan : keyframes) scan.attributes.time_s.clear();
+  const MappingResult keyed = map_survey(keyframes, spring, cpu);
+  const MappingResult keyed_off = map_survey(keyframes, off, cpu);
+  ASSERT_EQ(keyed.scans.size(), keyed_off.scans.size());
+  for (std::size_t k = 0; k < keyed.scans.size(); ++k) EXPECT_EQ(keyed.scans[k].pose_cm, keyed_off.scans[k].pose_cm) << k;
+  expect_rejected([](MappingSettings& s, double v) { s.motion.sweep_start_spring_pairs = v; },
+                  {-1.0, std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN()});
 }
 
 // The simulated spinning loop of seed 2 (80 m, 10 m/s), its first 22 sweeps: it starts in a corner,

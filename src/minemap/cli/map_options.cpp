@@ -211,6 +211,10 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
   number(g, "--weak-step-constraint", mapping.motion.weak_step_constraint,
          "Timed sweeps: where the last match pinned a direction less than this fraction of its best, the next "
          "start moves along it as the recent well-pinned steps did, not as the last step did (0 = off)");
+  number(g, "--sweep-spring-pairs", mapping.motion.sweep_start_spring_pairs,
+         "Timed sweeps: a match from the prediction holds the sensor to its start with a spring as strong as this "
+         "many point pairs; along what the surfaces hardly pin, the start holds (0 = off; 160 kept the simulated "
+         "hand-held loops within 1 %)");
   number(g, "--first-sweep-rematch", mapping.motion.first_sweep_rematch_scans,
          "Timed sweeps: the first sweep is matched again against this many sweeps after it once they are in, and "
          "they move together to where that puts them (0 = off)");

@@ -174,15 +174,38 @@ class IcpRun {
   /// never raises it, so it can judge a jump.
   double objective_of(const Pairing& sums, float bound_cm) const {
     const double bound = bound_cm;
-    return sums.residual_cm2() + (static_cast<double>(data_.points().size()) - sums.count()) * bound * bound;
+    return sums.residual_cm2() + (static_cast<double>(data_.points().size()) - sums.count()) * bound * bound +
+           start_spring_energy();
   }
 
   /// Horn's closed form for the pairs: the rigid step (data frame) that minimises E(R, t); or the
   /// point-to-plane system's step.
-  static std::optional<Pose> horn_step(const Pairing& sums) {
-    auto step = sums.planar ? plane_step(sums.plane) : horn_transform(sums.sums);
+  std::optional<Pose> horn_step(const Pairing& sums) const {
+    auto step = sums.planar ? plane_step(sums.plane) : horn_transform(with_start_spring(sums.sums));
     if (step && !is_valid_rigid(*step, 1e-6)) step.reset();
     return step;
+  }
+
+  /// The sums with the spring to the start added (IcpSettings::start_spring_pairs): the data
+  /// frame's origin paired with where the start puts it, both in the data frame at the current pose,
+  /// centred on the sums' reference as every pair is.
+  PairSums with_start_spring(const PairSums& sums) const {
+    const double weight = settings_.start_spring_pairs;
+    if (!(weight > 0.0)) return sums;
+    PairSums with = sums;
+    const Eigen::Vector3d data = -with.reference_cm;  // the origin
+    const Eigen::Vector3d model = (rigid_inverse(pose_) * start_).block<3, 1>(0, 3) - with.reference_cm;
+    with.sum_data += weight * data;
+    with.sum_model += weight * model;
+    with.sum_data_model += weight * data * model.transpose();
+    with.weight += weight;
+    return with;
+  }
+  /// The spring's energy at the current pose: its weight times its squared length (cm^2).
+  double start_spring_energy() const {
+    const double weight = settings_.start_spring_pairs;
+    if (!(weight > 0.0)) return 0.0;
+    return weight * (rigid_inverse(pose_) * start_).block<3, 1>(0, 3).squaredNorm();
   }
 
   /// Composes the step onto the pose and counts the iteration; false when the pose is not finite.

@@ -63,6 +63,13 @@ struct IcpSettings {
   /// kPointToPlane: register_icp must be given the data's normals; the robust kernel is then not
   /// applied (the planes' residuals are unweighted).
   IcpObjective objective = IcpObjective::kPointToPoint;
+  /// A spring that holds the data frame's origin (a sensor's own position) to where the run's start
+  /// put it: Horn's sums also hold that one pair, weighing as much as this many point pairs, and
+  /// ICP's objective its squared length times as much. Along a direction the surfaces pin, the
+  /// pairs outweigh it by far; along one they hardly pin (a corridor's axis, a wall seen alone), no
+  /// pair pulls, and a few that pair wrongly slide the match far: there the start holds instead.
+  /// Translation only: the point at the origin gives the turn no lever. 0: none (the paper's ICP).
+  float start_spring_pairs = 0.0f;
 
   /// The paper's ICP: approximate then exact search, 25 cm, plain steps.
   static IcpSettings paper() { return {}; }

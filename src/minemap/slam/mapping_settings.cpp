@@ -153,6 +153,9 @@ void MotionSettings::validate() const {
   if (!(slide_rms_factor > 0.0 && slide_rms_factor <= 1.0)) {
     throw std::invalid_argument("the slide test's RMS factor must be in (0, 1]");
   }
+  if (!(sweep_start_spring_pairs >= 0.0) || !std::isfinite(sweep_start_spring_pairs)) {
+    throw std::invalid_argument("the sweeps' start spring must be a finite weight >= 0 (in pairs; 0 = off)");
+  }
   if (!(weak_step_constraint >= 0.0 && weak_step_constraint <= 1.0)) {
     throw std::invalid_argument("the weak step's constraint must be a fraction in [0, 1] (0 = off)");
   }

@@ -177,6 +177,16 @@ struct MotionSettings {
   /// predictions 30-60 cm off anyway) it helped nothing and ended 2 of 12 runs doubtful. 0: off.
   double weak_step_constraint = 0.1;
   int weak_step_window = 20;  ///< ...over the trusted steps into the last this many scans
+  /// A timed sweep's match from its prediction, and its refinement after the deskew, hold the
+  /// sensor to their start with a spring as strong as this many point pairs (IcpSettings::
+  /// start_spring_pairs; translation only, point-to-point stages). Where the surfaces pin a
+  /// direction, a sweep's thousands of pairs outweigh it; along one they hardly pin, it keeps the
+  /// constant-velocity start where a few wrong pairs would slide the match sideways. At 160 the
+  /// six simulated hand-held loops ended 0.29-0.63 % off (0.46-2.80 % without), but a walk with
+  /// three sweeps dropped ended 16 cm short at the gap, trusted, and a spinning loop's first-sweep
+  /// fit in a corner failed; so it is not the default (docs/benchmarks.md, "A spring to the
+  /// prediction"). 0: off.
+  double sweep_start_spring_pairs = 0.0;
   /// A timed sweep is doubtful when its match and those of the sweeps before it, each pinning its
   /// weakest turn less than unpinned_turn_constraint of its best (RegistrationHealth::
   /// rotation_constraint), turned the sensor by more than this in all (each sweep's turn counted

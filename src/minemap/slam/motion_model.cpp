@@ -42,10 +42,15 @@ double MotionPrediction::time_ratio(const SurveyState& state, std::size_t a, std
   return top / bottom;
 }
 
+float MotionPrediction::start_spring_pairs(const SurveyState& state, std::size_t i) const {
+  return state.prepared(i).sweep_s > 0.0 ? static_cast<float>(settings_.motion.sweep_start_spring_pairs) : 0.0f;
+}
+
 Prediction MotionPrediction::predict(const SurveyState& state, std::size_t i) const {
   Prediction prediction;
   prediction.start_bound_cm = settings_.pairwise_icp().max_pair_dist_cm;
   prediction.objectives.fine = fine_objective(state, i);
+  prediction.objectives.start_spring_pairs = start_spring_pairs(state, i);
   if (!constant_velocity_at(state, i)) {
     const Pose odometry_step = rigid_inverse(state.odometry(i - 1)) * state.odometry(i);
     prediction.start = state.pose(i - 1) * odometry_step;

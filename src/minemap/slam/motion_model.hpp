@@ -8,9 +8,11 @@
 // predictions were off (KISS-ICP's adaptive threshold), so a fast hand-held sweep and a slow robot
 // both start within reach. Along a direction the last timed sweep's match could not pin, the
 // last step is not repeated (it would repeat its error): the recent well-pinned steps' mean move
-// along it is (MotionSettings::weak_step_constraint). The same constant velocity over one sweep is
-// what the deskew undoes (filter/deskew.hpp). And it sums how far the recent sweeps turned about
-// axes their matches could hardly pin (unpinned_turn: a doubt's figure).
+// along it is (MotionSettings::weak_step_constraint); a timed sweep's match may also be held to
+// its start by a spring (MotionSettings::sweep_start_spring_pairs, off by default). The same
+// constant velocity over one sweep is what the deskew undoes (filter/deskew.hpp). And it sums
+// how far the recent sweeps turned about axes their matches could hardly pin (unpinned_turn: a
+// doubt's figure).
 //
 // Reads the state, writes nothing. Thread-safety: const, one thread at a time with the state.
 #include <cstddef>
@@ -81,6 +83,10 @@ class MotionPrediction {
   /// their start: point-to-plane for a moving sensor's scan where MotionSettings::plane_objective
   /// asks for it, the paper's point-to-point otherwise. The one place that chooses it.
   IcpObjective fine_objective(const SurveyState& state, std::size_t i) const;
+  /// The spring that holds scan i's sensor to its match's start (MatchObjectives::
+  /// start_spring_pairs): MotionSettings::sweep_start_spring_pairs for a timed sweep, none
+  /// otherwise. The one place that chooses it.
+  float start_spring_pairs(const SurveyState& state, std::size_t i) const;
   /// The sensor's motion over scan j's sweep (start to end, its own file frame, cm) if it stood at
   /// T_world_points `pose_j` and scan `other` (j-1 or j+1) where the state holds it: the step
   /// between them at constant velocity, scaled by the sweep's duration over the time between their

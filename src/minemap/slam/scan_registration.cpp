@@ -48,6 +48,7 @@ WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, cons
   wide.max_pair_dist_cm = bound_cm;
   wide.refine_pair_dist_fraction = 0.0f;
   wide.robust_scale_fraction = objectives.coarse_kernel_fraction;
+  wide.start_spring_pairs = objectives.start_spring_pairs;
   WideMatch match;
   const PreparedCloud& coarse_data = coarse_on_probe ? *scan.probe : data_of(scan, convergence);
   if (coarse_on_probe) wide.termination.min_pairs = settings_.min_pairs_for(coarse_data.points().size());
@@ -58,7 +59,9 @@ WideMatch ScanRegistration::match_from_wide_bound(const PreparedScan& scan, cons
     match.failed = coarse;
     return match;
   }
-  IcpResult fine = run_icp(scan, data_of(scan, convergence), coarse.world_from_data, models, icp, objectives.fine);
+  IcpSettings fine_icp = icp;
+  fine_icp.start_spring_pairs = objectives.start_spring_pairs;
+  IcpResult fine = run_icp(scan, data_of(scan, convergence), coarse.world_from_data, models, fine_icp, objectives.fine);
   match.iterations += fine.iterations();
   if (!fine.ok()) {
     match.failure = to_string(fine.stop);
@@ -92,7 +95,9 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
     widest_cm = start_bound_cm;
   } else {
     const std::vector<WorldModel> models = models_for(icp_.max_pair_dist_cm, start);
-    match.first = run_icp(scan, data_of(scan, convergence), start, models, icp_for(scan, convergence), objectives.fine);
+    IcpSettings first_icp = icp_for(scan, convergence);
+    first_icp.start_spring_pairs = objectives.start_spring_pairs;
+    match.first = run_icp(scan, data_of(scan, convergence), start, models, first_icp, objectives.fine);
     match.iterations = match.first.iterations();
     if (!match.first.ok()) return match;
     match.health = judge(scan, match.first.world_from_data, start, models);

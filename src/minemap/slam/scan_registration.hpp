@@ -65,6 +65,9 @@ struct MatchObjectives {
   /// planes (PreparedScan::planes; point-to-point where it has none) for a moving sensor where
   /// MotionSettings::plane_objective asks for it.
   IcpObjective fine = IcpObjective::kPointToPoint;
+  /// The spring that holds the sensor to the match's start in each of its ICP runs but a retry's
+  /// (IcpSettings::start_spring_pairs): a timed sweep's, from its prediction and in its refinement.
+  float start_spring_pairs = 0.0f;
 };
 
 class ScanRegistration {
