@@ -852,13 +852,7 @@ TEST(MovingMapping, TheStartSpringHoldsTimedSweepsOnly) {
   MappingSettings spring = off;
   spring.motion.sweep_start_spring_pairs = 160.0;
   const auto mean_off_cm = [&](const MappingResult& result) {
-    double sum = 0.0;
-    for (std::size_t k = 1; k < survey.truth_cm.size(); ++k) {
-      const Pose mapped = rigid_inverse(result.scans[0].pose_cm) * result.scans[k].pose_cm;
-      const Pose truth = rigid_inverse(survey.truth_cm[0]) * survey.truth_cm[k];
-      sum += translation_norm(rigid_inverse(truth) * mapped);
-    }
-    return sum / double(survey.truth_cm.size() - 1);
+    return pose_errors(test::poses_of(result), survey.truth_cm).mean_translation_cm;
   };
   const MappingResult held = map_survey(survey.scans, spring, cpu);
   const MappingResult free = map_survey(survey.scans, off, cpu);
