@@ -213,8 +213,17 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
          "start moves along it as the recent well-pinned steps did, not as the last step did (0 = off)");
   number(g, "--sweep-spring-pairs", mapping.motion.sweep_start_spring_pairs,
          "Timed sweeps: a match from the prediction holds the sensor to its start with a spring as strong as this "
-         "many point pairs; along what the surfaces hardly pin, the start holds (0 = off; 160 kept the simulated "
-         "hand-held loops within 1 %)");
+         "many point pairs; along what the surfaces hardly pin, the start holds (a narrow field only, "
+         "--sweep-spring-max-field-deg; 0 = off)");
+  number(g, "--sweep-spring-full-error-cm", mapping.motion.sweep_spring_full_error_cm,
+         "Timed sweeps: the spring weighs fully while the recent predictions were off by at most this (RMS), less "
+         "with the square of their error beyond");
+  number(g, "--sweep-spring-max-field-deg", mapping.motion.sweep_spring_max_field_deg,
+         "Timed sweeps: the spring holds only sweeps whose points span less azimuth than this about the sensor (a "
+         "narrow field; 360 = every sweep)");
+  number(g, "--sprung-release-cm", mapping.motion.sprung_release_cm,
+         "Timed sweeps: a held match that ended further than this from its prediction is matched again without the "
+         "spring; where the two disagree, the scan's features decide, or the scan is doubtful");
   number(g, "--first-sweep-rematch", mapping.motion.first_sweep_rematch_scans,
          "Timed sweeps: the first sweep is matched again against this many sweeps after it once they are in, and "
          "they move together to where that puts them (0 = off)");

@@ -156,6 +156,15 @@ void MotionSettings::validate() const {
   if (!(sweep_start_spring_pairs >= 0.0) || !std::isfinite(sweep_start_spring_pairs)) {
     throw std::invalid_argument("the sweeps' start spring must be a finite weight >= 0 (in pairs; 0 = off)");
   }
+  if (!(sweep_spring_full_error_cm > 0.0) || !std::isfinite(sweep_spring_full_error_cm)) {
+    throw std::invalid_argument("the sweeps' spring's full-weight error must be a finite length > 0 cm");
+  }
+  if (!(sweep_spring_max_field_deg > 0.0 && sweep_spring_max_field_deg <= 360.0)) {
+    throw std::invalid_argument("the sweeps' spring's widest field must be in (0, 360] degrees");
+  }
+  if (!(sprung_release_cm > 0.0) || !std::isfinite(sprung_release_cm)) {
+    throw std::invalid_argument("a held match's release distance must be a finite length > 0 cm");
+  }
   if (!(weak_step_constraint >= 0.0 && weak_step_constraint <= 1.0)) {
     throw std::invalid_argument("the weak step's constraint must be a fraction in [0, 1] (0 = off)");
   }

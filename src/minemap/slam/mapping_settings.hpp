@@ -181,12 +181,27 @@ struct MotionSettings {
   /// sensor to their start with a spring as strong as this many point pairs (IcpSettings::
   /// start_spring_pairs; translation only, point-to-point stages). Where the surfaces pin a
   /// direction, a sweep's thousands of pairs outweigh it; along one they hardly pin, it keeps the
-  /// constant-velocity start where a few wrong pairs would slide the match sideways. At 160 the
-  /// six simulated hand-held loops ended 0.29-0.63 % off (0.46-2.80 % without), but a walk with
-  /// three sweeps dropped ended 16 cm short at the gap, trusted, and a spinning loop's first-sweep
-  /// fit in a corner failed; so it is not the default (docs/benchmarks.md, "A spring to the
-  /// prediction"). 0: off.
-  double sweep_start_spring_pairs = 0.0;
+  /// constant-velocity start where a few wrong pairs would slide the match sideways. The six
+  /// simulated hand-held loops end 0.26-0.99 % off their paths with it, 0.46-2.80 % without
+  /// (docs/benchmarks.md, "A spring for a narrow field"). 0: off.
+  double sweep_start_spring_pairs = 160.0;
+  /// ...at full weight while the recent predictions' translation error (PredictionError::
+  /// translation_rms_cm, over at least confirm_min_history trusted matches) is at most this, and
+  /// weaker with its square beyond (half the weight at 1.4 times it): a prediction that has been
+  /// off by decimetres (a sensor turning fast, a corner taken at speed) holds a match no better.
+  /// With fewer trusted matches behind it, none.
+  double sweep_spring_full_error_cm = 4.0;
+  /// ...and only on a sweep whose points span less than this many degrees of azimuth about the
+  /// sensor (a narrow field, a rosette scanner's): it sees a corridor's walls only ahead, where they
+  /// pin nothing along it, and slides. A spinning sensor sees the walls beside it, and what its
+  /// prediction gets wrong is the turn in a corner, which a spring cannot mend. 360: every sweep.
+  double sweep_spring_max_field_deg = 180.0;
+  /// A held match that ended more than this from its prediction is matched again without the
+  /// spring: where the two end apart (confirm_agree_cm / _deg), the surfaces measured a move the
+  /// spring held short of (a change of speed) or a slide it saved. The scan's FPFH features decide:
+  /// the one they agree with is kept; where they find nothing or agree with neither, the held one
+  /// is kept and named doubtful (SurveyMatcher::release_held_match).
+  double sprung_release_cm = 8.0;
   /// A timed sweep is doubtful when its match and those of the sweeps before it, each pinning its
   /// weakest turn less than unpinned_turn_constraint of its best (RegistrationHealth::
   /// rotation_constraint), turned the sensor by more than this in all (each sweep's turn counted

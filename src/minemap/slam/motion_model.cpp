@@ -1,8 +1,10 @@
 #include "minemap/slam/motion_model.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
+#include <span>
 
 #include <Eigen/Geometry>
 
@@ -42,8 +44,37 @@ double MotionPrediction::time_ratio(const SurveyState& state, std::size_t a, std
   return top / bottom;
 }
 
+namespace {
+
+/// The azimuth the points span about the data frame's z axis (degrees, in 5 degree bins; a bin
+/// counts when it holds at least 1 in 500 of the points, so stray returns do not widen it).
+double azimuth_span_deg(std::span<const Eigen::Vector3f> points) {
+  constexpr int kBins = 72;
+  std::array<std::size_t, kBins> count{};
+  for (const Eigen::Vector3f& p : points) {
+    const double angle = std::atan2(double(p.y()), double(p.x()));  // (-pi, pi]
+    const int bin = std::clamp(static_cast<int>((angle + std::numbers::pi) / (2.0 * std::numbers::pi) * kBins), 0,
+                               kBins - 1);
+    ++count[static_cast<std::size_t>(bin)];
+  }
+  int taken = 0;
+  for (const std::size_t c : count) taken += 500 * c >= points.size() && c > 0 ? 1 : 0;
+  return taken * (360.0 / kBins);
+}
+
+}  // namespace
+
 float MotionPrediction::start_spring_pairs(const SurveyState& state, std::size_t i) const {
-  return state.prepared(i).sweep_s > 0.0 ? static_cast<float>(settings_.motion.sweep_start_spring_pairs) : 0.0f;
+  const MotionSettings& motion = settings_.motion;
+  if (!(state.prepared(i).sweep_s > 0.0) || !(motion.sweep_start_spring_pairs > 0.0)) return 0.0f;
+  const PredictionError recent = recent_error(state, i);
+  if (recent.count < motion.confirm_min_history) return 0.0f;
+  if (motion.sweep_spring_max_field_deg < 360.0 && state.prepared(i).cloud &&
+      !(azimuth_span_deg(state.prepared(i).cloud->points()) < motion.sweep_spring_max_field_deg)) {
+    return 0.0f;
+  }
+  const double ratio = motion.sweep_spring_full_error_cm / std::max(recent.translation_rms_cm, 1e-9);
+  return static_cast<float>(motion.sweep_start_spring_pairs * std::min(1.0, ratio * ratio));
 }
 
 Prediction MotionPrediction::predict(const SurveyState& state, std::size_t i) const {

@@ -9,10 +9,10 @@
 // both start within reach. Along a direction the last timed sweep's match could not pin, the
 // last step is not repeated (it would repeat its error): the recent well-pinned steps' mean move
 // along it is (MotionSettings::weak_step_constraint); a timed sweep's match may also be held to
-// its start by a spring (MotionSettings::sweep_start_spring_pairs, off by default). The same
-// constant velocity over one sweep is what the deskew undoes (filter/deskew.hpp). And it sums
-// how far the recent sweeps turned about axes their matches could hardly pin (unpinned_turn: a
-// doubt's figure).
+// its start by a spring (MotionSettings::sweep_start_spring_pairs: a narrow-field sweep, weaker
+// as the recent predictions were off). The same constant velocity over one sweep is what the
+// deskew undoes (filter/deskew.hpp). And it sums how far the recent sweeps turned about axes their
+// matches could hardly pin (unpinned_turn: a doubt's figure).
 //
 // Reads the state, writes nothing. Thread-safety: const, one thread at a time with the state.
 #include <cstddef>
@@ -84,8 +84,10 @@ class MotionPrediction {
   /// asks for it, the paper's point-to-point otherwise. The one place that chooses it.
   IcpObjective fine_objective(const SurveyState& state, std::size_t i) const;
   /// The spring that holds scan i's sensor to its match's start (MatchObjectives::
-  /// start_spring_pairs): MotionSettings::sweep_start_spring_pairs for a timed sweep, none
-  /// otherwise. The one place that chooses it.
+  /// start_spring_pairs): MotionSettings::sweep_start_spring_pairs for a timed sweep whose points
+  /// span less azimuth than sweep_spring_max_field_deg, scaled down by the square of the recent
+  /// predictions' error beyond sweep_spring_full_error_cm; none before confirm_min_history trusted
+  /// matches, nor for any other scan. The one place that chooses it.
   float start_spring_pairs(const SurveyState& state, std::size_t i) const;
   /// The sensor's motion over scan j's sweep (start to end, its own file frame, cm) if it stood at
   /// T_world_points `pose_j` and scan `other` (j-1 or j+1) where the state holds it: the step

@@ -294,6 +294,78 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
   keep_first_match(match, text);
 }
 
+void SurveyMatcher::release_held_match(std::size_t i, const Prediction& prediction, ScanMatch& match,
+                                       Convergence convergence) {
+  const MotionSettings& motion = settings_.motion;
+  if (!(prediction.objectives.start_spring_pairs > 0.0f) || !match.ok() || match.health.doubtful() || match.retry ||
+      !(match.health.correction_cm > motion.sprung_release_cm)) {
+    return;
+  }
+  Prediction released = prediction;
+  released.objectives.start_spring_pairs = 0.0f;
+  const LastMetascan held_metascan = last_metascan_;
+  ScanMatch plain = match_from(i, released, convergence);
+  step1_iterations_ += plain.iterations;
+  const auto apart = [](const ScanMatch& a, const Pose& b) { return Pose(rigid_inverse(a.kept().world_from_data) * b); };
+  const auto agree = [&](const Pose& d) {
+    return translation_norm(d) <= motion.confirm_agree_cm && rotation_angle_deg(d) <= motion.confirm_agree_deg;
+  };
+  const Pose held = match.kept().world_from_data;
+  if (!plain.ok() || agree(apart(plain, held))) {
+    last_metascan_ = held_metascan;
+    return;
+  }
+  // Two answers: where the prediction held the sensor, and where the surfaces alone put it. The
+  // scan's features are the independent start that decides.
+  const double plain_cm = translation_norm(rigid_inverse(prediction.start) * plain.kept().world_from_data);
+  std::string decided = "its FPFH features found no start";
+  if (recovery_on(i)) {
+    const RecoveredStart& features = features_start(i);
+    if (features.global.found) {
+      Prediction other;
+      other.objectives.fine = motion_.fine_objective(state_, i);
+      other.start = features.start;
+      ScanMatch third = match_from(i, other, convergence);
+      step1_iterations_ += third.iterations;
+      if (third.ok() && !third.health.doubtful()) {
+        const Pose found = third.kept().world_from_data;
+        char text[400];
+        if (!plain.health.doubtful() && !plain.retry && agree(apart(plain, found))) {
+          std::snprintf(text, sizeof text,
+                        "the spring to the prediction held it %.0f cm from it; without the spring the match ended %.0f "
+                        "cm from it, and a match from where its FPFH features put it %.1f cm from that: kept without "
+                        "the spring",
+                        match.health.correction_cm, plain_cm, translation_norm(apart(plain, found)));
+          measure_from_prediction(i, prediction, plain);
+          plain.health.note = text;
+          match = std::move(plain);
+          return;
+        }
+        if (agree(apart(match, found))) {
+          last_metascan_ = held_metascan;
+          return;
+        }
+        decided = "a match from where its FPFH features put it agreed with neither";
+      } else {
+        decided = "the match from where its FPFH features put it was not trusted";
+      }
+    } else {
+      decided = "its FPFH features found no start (" + features.global.why_not + ")";
+      features_said_ = true;
+    }
+  }
+  last_metascan_ = held_metascan;
+  char text[640];
+  std::snprintf(text, sizeof text,
+                "the spring to the prediction held it %.0f cm from it, where without the spring the match ended %.0f "
+                "cm from it (%.0f cm / %.1f deg apart), and no independent start confirmed either: %s; whether the "
+                "sensor changed speed or the surfaces slid is not known",
+                match.health.correction_cm, plain_cm, translation_norm(apart(plain, held)),
+                rotation_angle_deg(apart(plain, held)), decided.c_str());
+  match.health.doubt = text;
+  match.health.failed = HealthTest::kReach;  // a doubt about the move: the deskew's refinement keeps it
+}
+
 void SurveyMatcher::measure_from_prediction(std::size_t i, const Prediction& prediction, ScanMatch& match) const {
   const Pose correction = rigid_inverse(prediction.start) * match.kept().world_from_data;
   match.health.correction_cm = translation_norm(correction);
@@ -310,6 +382,7 @@ void SurveyMatcher::keep_first_match(ScanMatch& match, const char* refuted) {
   match.retry.reset();
   match.health = std::move(match.first_health);
   match.health.doubt += std::string(" (") + refuted + "; the scan stays where its first match put it)";
+  match.health.failed = HealthTest::kReach;  // about the move: the deskew's refinement keeps it
 }
 
 void SurveyMatcher::prefer_prediction_along_slide(std::size_t i, const Prediction& prediction, ScanMatch& match,
@@ -453,6 +526,7 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
                                         : Convergence::kFinal;
     ScanMatch match = match_from(i, prediction, convergence);
     step1_iterations_ += match.iterations;
+    release_held_match(i, prediction, match, convergence);
     confirm_far_match(i, prediction, match, convergence);
     Pose start = prediction.start;
     recover(i, prediction, match, start, convergence);

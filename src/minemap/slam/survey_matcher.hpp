@@ -125,6 +125,12 @@ class SurveyMatcher {
   /// kept changes nothing.
   void prefer_prediction_along_slide(std::size_t i, const Prediction& prediction, ScanMatch& match,
                                      Convergence convergence);
+  /// A match held by the spring to its prediction (MatchObjectives::start_spring_pairs) that still
+  /// ended more than MotionSettings::sprung_release_cm from it: matched again without the spring.
+  /// Where the two end apart, a match from the scan's FPFH features decides: agreeing with the free
+  /// one, that is kept (a change of speed the spring held short, with a note); agreeing with the
+  /// held one, it stays; else the held one stays, doubtful, its doubt naming both.
+  void release_held_match(std::size_t i, const Prediction& prediction, ScanMatch& match, Convergence convergence);
   /// Whether scan i may be recovered: recovery on, scan i-1 registered.
   bool recovery_on(std::size_t i) const;
   /// Where scan i's features put it (Recovery::find), computed once per scan.
