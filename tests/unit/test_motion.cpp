@@ -322,6 +322,35 @@ TEST(MovingMapping, SpinningAtTenMetresPerSecondWithoutOdometry) {
   EXPECT_LT(run.errors.mean_translation_cm, 1.25 * full.errors.mean_translation_cm);
   EXPECT_LT(run.errors.mean_relative_translation_cm, 1.25 * full.errors.mean_relative_translation_cm);
   EXPECT_EQ(full.doubtful, 0u);
+  // The refinement's match searching exactly from its first iteration (MotionSettings::
+  // refine_exact_search, not the default): it starts where the first match converged, where the
+  // paper's approximate phase only leads it away; fewer iterations, the same accuracy. With the exact
+  // search everywhere (--search kd) the setting changes nothing.
+  MappingSettings exact_refinement = defaults;
+  ASSERT_FALSE(defaults.motion.refine_exact_search);
+  exact_refinement.motion.refine_exact_search = true;
+  const MovingRun refined = map_moving(survey, exact_refinement);
+  std::printf("refinement exact: %d iterations, %.2f cm mean, %.2f cm step; approximate first: %d, %.2f cm, %.2f cm\n",
+              refined.iterations, refined.errors.mean_translation_cm, refined.errors.mean_relative_translation_cm,
+              run.iterations, run.errors.mean_translation_cm, run.errors.mean_relative_translation_cm);
+  EXPECT_LT(refined.iterations, run.iterations * 95 / 100);
+  EXPECT_LT(refined.errors.mean_translation_cm, 1.25 * run.errors.mean_translation_cm);
+  EXPECT_LT(refined.errors.mean_relative_translation_cm, 1.25 * run.errors.mean_relative_translation_cm);
+  EXPECT_EQ(refined.doubtful, 0u);
+  sim::MovingSurvey first_twelve = survey;
+  first_twelve.scans.resize(12);
+  first_twelve.truth_cm.resize(12);
+  MappingSettings exact = defaults;
+  exact.icp.method = SearchMethod::kExact;
+  MappingSettings exact_scheduled = exact;
+  exact_scheduled.motion.refine_exact_search = true;
+  CpuBackend cpu;
+  const MappingResult exact_run = map_survey(first_twelve.scans, exact, cpu);
+  const MappingResult exact_run_too = map_survey(first_twelve.scans, exact_scheduled, cpu);
+  ASSERT_EQ(exact_run.scans.size(), exact_run_too.scans.size());
+  for (std::size_t k = 0; k < exact_run.scans.size(); ++k) {
+    EXPECT_EQ(exact_run.scans[k].pose_cm, exact_run_too.scans[k].pose_cm) << k;
+  }
   MappingSettings bad = defaults;
   for (const double factor : {0.5, std::nan(""), std::numeric_limits<double>::infinity()}) {
     bad.motion.provisional_step_factor = factor;
@@ -447,8 +476,11 @@ TEST(MovingMapping, AJumpFromThePredictionIsTrustedOnlyWhenASecondStartAgrees) {
   std::printf("three missing at 22, deskewed: %.1f cm; doubt: %s; %zu doubtful, the map %.1f cm off at most\n",
               held.correction_cm, held.doubt.c_str(), held_gap.doubtful().size(),
               pose_errors(test::poses_of(held_gap), at_22.truth_cm).max_translation_cm);
-  const bool named = held_gap.doubtful() == std::vector<std::size_t>{22} &&
-                     held.doubt.find("the spring to the prediction held it") != std::string::npos;
+  for (const std::size_t k : held_gap.doubtful()) std::printf("  doubtful %zu: %s\n", k, held_gap.scans[k].health.doubt.c_str());
+  // (The sweep after it may be named too, predicted from the held step: with the refinement's exact
+  // search, MotionSettings::refine_exact_search, GCC's Release build names 23 as well, held 15 cm
+  // from its prediction where the free match ended 37.)
+  const bool named = held.doubtful() && held.doubt.find("the spring to the prediction held it") != std::string::npos;
   const bool right = !held.doubtful() &&
                      pose_errors(test::poses_of(held_gap), at_22.truth_cm).max_translation_cm < 30.0;
   EXPECT_TRUE(named || right) << held.doubt;
@@ -870,7 +902,8 @@ TEST(MovingMapping, TheFirstSweepMatchedAgainstTheSweepsAfterItTurnsTheMapRight)
 
 // The spring to the prediction (MotionSettings::sweep_start_spring_pairs): a narrow-field timed
 // sweep's matches from its prediction take it; keyframes without times and a spinning sensor's
-// sweeps (they span 360 deg of azimuth) do not, their outputs the same bits with it off. Its effect
+// sweeps (they span 360 deg of azimuth about the sensor, wherever their points are stored) do not,
+// their outputs the same bits with it off. Its effect
 // on drift is docs/benchmarks.md's, "A spring for a narrow field"; the mechanism's test is
 // test_horn_icp.cpp's IcpStartSpring.
 TEST(MovingMapping, TheStartSpringHoldsNarrowFieldTimedSweepsOnly) {
@@ -914,6 +947,21 @@ TEST(MovingMapping, TheStartSpringHoldsNarrowFieldTimedSweepsOnly) {
   bool spun_differ = false;
   for (std::size_t k = 1; k < spun.scans.size(); ++k) spun_differ = spun_differ || spun_held.scans[k].pose_cm != spun.scans[k].pose_cm;
   EXPECT_TRUE(spun_differ) << "every field held: the spinning sweeps take the spring";
+  // The same sweeps stored about an origin 80 m to the side (read relative to a local origin, as a
+  // file whose points lie far from its frame's): about that origin they span a few tens of degrees,
+  // about the sensor still 360, and the field is the sensor's. No spring: the same bits as without.
+  std::vector<Scan> aside = drive.scans;
+  const Eigen::Vector3f offset(0.0f, 8000.0f, 0.0f);
+  for (Scan& scan : aside) {
+    for (Eigen::Vector3f& p : scan.points_cm) p -= offset;
+    scan.local_origin_cm += offset.cast<double>();
+  }
+  const MappingResult aside_held = map_survey(aside, spring, cpu);
+  const MappingResult aside_off = map_survey(aside, off, cpu);
+  ASSERT_EQ(aside_held.scans.size(), aside_off.scans.size());
+  for (std::size_t k = 0; k < aside_held.scans.size(); ++k) {
+    EXPECT_EQ(aside_held.scans[k].pose_cm, aside_off.scans[k].pose_cm) << "stored aside " << k;
+  }
   expect_rejected([](MappingSettings& s, double v) { s.motion.sweep_start_spring_pairs = v; },
                   {-1.0, std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN()});
   expect_rejected([](MappingSettings& s, double v) { s.motion.sweep_spring_full_error_cm = v; },

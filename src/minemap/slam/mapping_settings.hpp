@@ -107,6 +107,16 @@ struct MotionSettings {
   /// Whether a sweep's first match is provisional (by either setting above): then its refinement
   /// always matches again, to ICP's least step, with all points.
   bool provisional() const { return provisional_step_factor > 1.0 || provisional_probe; }
+  /// true: the refinement's match (a sweep matched again after its deskew, from where its first
+  /// match ended) searches exactly from its first iteration, without the paper's approximate phase.
+  /// That phase is for a start far from the answer; from a converged one it leads away (the
+  /// approximate kd-tree pairs with its buckets' means, whose minimum is not the points') and the
+  /// exact phase walks back: on the simulated spinning drive the refinement spent 4.4 approximate
+  /// and 10.0 exact iterations, and 7.0 exact ones with this on, for 0.94-0.96x the wall time. Not
+  /// the default: the chaotic hand-held loops move both ways with it, two of six to 1.06 / 1.08 %
+  /// of their paths (docs/benchmarks.md, "The refinement's exact search"). Only with
+  /// SearchMethod::kApproximate (the others are already exact).
+  bool refine_exact_search = false;
   /// The first match at the adaptive bound (wider than the pair bound) runs its coarse stage, at
   /// that bound, on the health probe's points alone: it only has to bring the scan within the pair
   /// bound's reach, and the fine stage after it matches every point. On real hand-held keyframes

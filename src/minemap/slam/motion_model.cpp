@@ -46,13 +46,18 @@ double MotionPrediction::time_ratio(const SurveyState& state, std::size_t a, std
 
 namespace {
 
-/// The azimuth the points span about the data frame's z axis (degrees, in 5 degree bins; a bin
-/// counts when it holds at least 1 in 500 of the points, so stray returns do not widen it).
-double azimuth_span_deg(std::span<const Eigen::Vector3f> points) {
+/// The azimuth the points span about the sensor: the z axis of their file's frame, `file_from_points`
+/// taking them there (degrees, in 5 degree bins; a bin counts when it holds at least 1 in 500 of the
+/// points, so stray returns do not widen it). Points stored about another origin (far from their
+/// frame's, read relative to a local one) are measured where the sensor stood, not about that origin.
+double azimuth_span_deg(std::span<const Eigen::Vector3f> points, const Pose& file_from_points) {
   constexpr int kBins = 72;
   std::array<std::size_t, kBins> count{};
-  for (const Eigen::Vector3f& p : points) {
-    const double angle = std::atan2(double(p.y()), double(p.x()));  // (-pi, pi]
+  const bool moved = !file_from_points.isIdentity(0.0);
+  for (const Eigen::Vector3f& stored : points) {
+    const Eigen::Vector3d p = moved ? Eigen::Vector3d((file_from_points * stored.cast<double>().homogeneous()).head<3>())
+                                    : Eigen::Vector3d(stored.cast<double>());
+    const double angle = std::atan2(p.y(), p.x());  // (-pi, pi]
     const int bin = std::clamp(static_cast<int>((angle + std::numbers::pi) / (2.0 * std::numbers::pi) * kBins), 0,
                                kBins - 1);
     ++count[static_cast<std::size_t>(bin)];
@@ -70,7 +75,8 @@ float MotionPrediction::start_spring_pairs(const SurveyState& state, std::size_t
   const PredictionError recent = recent_error(state, i);
   if (recent.count < motion.confirm_min_history) return 0.0f;
   if (motion.sweep_spring_max_field_deg < 360.0 && state.prepared(i).cloud &&
-      !(azimuth_span_deg(state.prepared(i).cloud->points()) < motion.sweep_spring_max_field_deg)) {
+      !(azimuth_span_deg(state.prepared(i).cloud->points(), rigid_inverse(state.points_from_file(i))) <
+        motion.sweep_spring_max_field_deg)) {
     return 0.0f;
   }
   const double ratio = motion.sweep_spring_full_error_cm / std::max(recent.translation_rms_cm, 1e-9);

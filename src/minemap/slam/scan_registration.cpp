@@ -97,6 +97,9 @@ ScanMatch ScanRegistration::register_scan(const PreparedScan& scan, const Pose& 
     const std::vector<WorldModel> models = models_for(icp_.max_pair_dist_cm, start);
     IcpSettings first_icp = icp_for(scan, convergence);
     first_icp.start_spring_pairs = objectives.start_spring_pairs;
+    if (objectives.exact_from_start && first_icp.method == SearchMethod::kApproximate) {
+      first_icp.method = SearchMethod::kExact;
+    }
     match.first = run_icp(scan, data_of(scan, convergence), start, models, first_icp, objectives.fine);
     match.iterations = match.first.iterations();
     if (!match.first.ok()) return match;

@@ -68,6 +68,11 @@ struct MatchObjectives {
   /// The spring that holds the sensor to the match's start in each of its ICP runs but a retry's
   /// (IcpSettings::start_spring_pairs): a timed sweep's, from its prediction and in its refinement.
   float start_spring_pairs = 0.0f;
+  /// The match at the pair bound searches exactly from its first iteration (SearchMethod::kExact
+  /// where the settings say kApproximate): a start where a match of the same scan converged (the
+  /// deskew's refinement, MotionSettings::refine_exact_search). Wide matches and retries keep the
+  /// settings' schedule.
+  bool exact_from_start = false;
 };
 
 class ScanRegistration {

@@ -265,11 +265,11 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
   if (second.ok() && !second.health.doubtful()) {
     const Pose found = second.kept().world_from_data;
     const Pose apart = rigid_inverse(kept) * found;
-    if (translation_norm(apart) <= motion.confirm_agree_cm && rotation_angle_deg(apart) <= motion.confirm_agree_deg) {
+    if (agree(kept, found)) {
       if (jumped) {  // two starts, one pose: confirmed (a jump says so in its note)
         std::snprintf(text, sizeof text, "%s; a match from %s ended %.1f cm / %.2f deg from it: confirmed", what,
                       second_start, translation_norm(apart), rotation_angle_deg(apart));
-        match.health.note = text;
+        add_note(match.health, text);
       }
       return;
     }
@@ -282,7 +282,8 @@ void SurveyMatcher::confirm_far_match(std::size_t i, const Prediction& predictio
                     "kept",
                     what, second_start, translation_norm(correction), translation_norm(apart), rotation_angle_deg(apart));
       measure_from_prediction(i, prediction, second);
-      second.health.note = text;
+      second.health.note = match.health.note;  // how the first came to be (the spring's release) stays said
+      add_note(second.health, text);
       match = std::move(second);
       return;
     }
@@ -307,11 +308,8 @@ void SurveyMatcher::release_held_match(std::size_t i, const Prediction& predicti
   ScanMatch plain = match_from(i, released, convergence);
   step1_iterations_ += plain.iterations;
   const auto apart = [](const ScanMatch& a, const Pose& b) { return Pose(rigid_inverse(a.kept().world_from_data) * b); };
-  const auto agree = [&](const Pose& d) {
-    return translation_norm(d) <= motion.confirm_agree_cm && rotation_angle_deg(d) <= motion.confirm_agree_deg;
-  };
   const Pose held = match.kept().world_from_data;
-  if (!plain.ok() || agree(apart(plain, held))) {
+  if (!plain.ok() || agree(plain.kept().world_from_data, held)) {
     last_metascan_ = held_metascan;
     return;
   }
@@ -330,7 +328,7 @@ void SurveyMatcher::release_held_match(std::size_t i, const Prediction& predicti
       if (third.ok() && !third.health.doubtful()) {
         const Pose found = third.kept().world_from_data;
         char text[400];
-        if (!plain.health.doubtful() && !plain.retry && agree(apart(plain, found))) {
+        if (!plain.health.doubtful() && !plain.retry && agree(plain.kept().world_from_data, found)) {
           std::snprintf(text, sizeof text,
                         "the spring to the prediction held it %.0f cm from it; without the spring the match ended %.0f "
                         "cm from it, and a match from where its FPFH features put it %.1f cm from that: kept without "
@@ -341,7 +339,7 @@ void SurveyMatcher::release_held_match(std::size_t i, const Prediction& predicti
           match = std::move(plain);
           return;
         }
-        if (agree(apart(match, found))) {
+        if (agree(held, found)) {
           last_metascan_ = held_metascan;
           return;
         }
@@ -364,6 +362,16 @@ void SurveyMatcher::release_held_match(std::size_t i, const Prediction& predicti
                 rotation_angle_deg(apart(plain, held)), decided.c_str());
   match.health.doubt = text;
   match.health.failed = HealthTest::kReach;  // a doubt about the move: the deskew's refinement keeps it
+}
+
+bool SurveyMatcher::agree(const Pose& a, const Pose& b) const {
+  const Pose apart = rigid_inverse(a) * b;
+  const MotionSettings& motion = settings_.motion;
+  return translation_norm(apart) <= motion.confirm_agree_cm && rotation_angle_deg(apart) <= motion.confirm_agree_deg;
+}
+
+void SurveyMatcher::add_note(RegistrationHealth& health, const std::string& text) {
+  health.note = health.note.empty() ? text : health.note + "; " + text;
 }
 
 void SurveyMatcher::measure_from_prediction(std::size_t i, const Prediction& prediction, ScanMatch& match) const {
@@ -429,7 +437,8 @@ void SurveyMatcher::prefer_prediction_along_slide(std::size_t i, const Predictio
                 "kept",
                 slid_cm, health.translation_constraint, health.rms_cm, second_cm, second.health.rms_cm);
   measure_from_prediction(i, prediction, second);
-  second.health.note = health.note.empty() ? std::string(text) : health.note + "; " + text;
+  second.health.note = health.note;
+  add_note(second.health, text);
   match = std::move(second);
 }
 
@@ -470,10 +479,8 @@ void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMat
     return h.failed == HealthTest::kReach || h.failed == HealthTest::kBeyondBound || h.failed == HealthTest::kEdge;
   };
   const Pose apart = match.ok() && again.ok() ? Pose(rigid_inverse(match.kept().world_from_data) * again.kept().world_from_data) : Pose::Identity();
-  const MotionSettings& motion = settings_.motion;
-  const bool agree = match.ok() && again.ok() && translation_norm(apart) <= motion.confirm_agree_cm &&
-                     rotation_angle_deg(apart) <= motion.confirm_agree_deg;
-  if (agree && start_dependent(match.health) && (!again.health.doubtful() || start_dependent(again.health))) {
+  const bool agreed = match.ok() && again.ok() && agree(match.kept().world_from_data, again.kept().world_from_data);
+  if (agreed && start_dependent(match.health) && (!again.health.doubtful() || start_dependent(again.health))) {
     std::snprintf(text, sizeof text,
                   "trusted: the match from %s and one from its FPFH features (%zu of %zu feature pairs agreeing) "
                   "ended %.1f cm / %.2f deg apart; alone, it was doubtful: %s",
@@ -481,7 +488,7 @@ void SurveyMatcher::recover(std::size_t i, const Prediction& prediction, ScanMat
                   found.global.correspondences, translation_norm(apart), rotation_angle_deg(apart),
                   match.health.doubt.c_str());
     RegistrationHealth& confirmed = may_replace ? again.health : match.health;
-    confirmed.note = text;
+    add_note(confirmed, text);
     confirmed.doubt.clear();
     confirmed.failed = HealthTest::kNone;
     confirmed.out_of_reach = false;

@@ -131,6 +131,13 @@ class SurveyMatcher {
   /// one, that is kept (a change of speed the spring held short, with a note); agreeing with the
   /// held one, it stays; else the held one stays, doubtful, its doubt naming both.
   void release_held_match(std::size_t i, const Prediction& prediction, ScanMatch& match, Convergence convergence);
+  /// Whether two matches of one scan, ending at `a` and `b`, agree: within
+  /// MotionSettings::confirm_agree_cm and confirm_agree_deg of each other. The one test of
+  /// agreement between two starts (confirm_far_match, release_held_match, recover).
+  bool agree(const Pose& a, const Pose& b) const;
+  /// Adds `text` to a match's note, after what it says already (each step that kept or confirmed
+  /// a match says how, and a later step does not erase an earlier one's word).
+  static void add_note(RegistrationHealth& health, const std::string& text);
   /// Whether scan i may be recovered: recovery on, scan i-1 registered.
   bool recovery_on(std::size_t i) const;
   /// Where scan i's features put it (Recovery::find), computed once per scan.

@@ -40,6 +40,7 @@ void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTim
   Prediction here;
   here.objectives.fine = motion_.fine_objective(state_, i);
   here.objectives.start_spring_pairs = motion_.start_spring_pairs(state_, i);  // held where the first match put it
+  here.objectives.exact_from_start = settings_.motion.refine_exact_search;  // it starts converged (not by default)
   here.start = state_.pose(i);
   here.start_bound_cm = settings_.pairwise_icp().max_pair_dist_cm;
   ScanMatch again = match_from(i, here);
