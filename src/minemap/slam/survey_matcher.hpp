@@ -5,7 +5,9 @@
 // deskewed again by its match and matched again (refine_deskew), doubted where recent sweeps turned
 // about axes their surfaces cannot pin (doubt_unpinned_turn), and the first sweep, the survey's
 // frame, is matched again once the sweeps after it are in (rematch_first_sweep): those three in
-// sweep_matching.cpp. The stages it calls:
+// sweep_matching.cpp. A match that went far is checked from a second start before it is trusted
+// (confirm_far_match, release_held_match, prefer_prediction_along_slide, recover): those in
+// second_starts.cpp. The stages it calls:
 //   scan_preparation   reduce one scan, build its trees (paper IV.C)
 //   survey_state       where every scan stands; the one writer of poses
 //   local_map          the metascan, and the relaxation's union
