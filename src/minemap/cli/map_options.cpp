@@ -329,6 +329,9 @@ void MapOptionTable::declare_loops(MapOptions& map, MappingSettings& mapping) {
          "After the relaxation each scan is judged again against this many nearest scans (0 = all near it)");
   number(g, "--loop-judge-max-visits", loops.judge_max_visits,
          "...of at most this many visits to its place: its own, the first, the next nearest in the drive (0 = all)");
+  number(g, "--loop-visit-sweeps", loops.visit_sweeps,
+         "A narrow-field timed sweep's loop match is against the sweeps within this many of the earlier one, before and "
+         "after it, as one local map (0 = that sweep alone)");
   number(g, "--loop-max-misclosure-fraction", loops.max_misclosure_fraction,
          "A loop that closes further apart than this fraction of its drive makes its scan doubtful (0 = never)");
   number(g, "--loop-max-turn-deg-per-100m", loops.max_turn_deg_per_100m,

@@ -5,6 +5,7 @@
 #include <span>
 
 #include "minemap/registration/match_information.hpp"
+#include "minemap/slam/motion_model.hpp"
 
 namespace minemap::detail {
 namespace {
@@ -78,7 +79,30 @@ LoopClosing::Return LoopClosing::next_return(const SurveyState& state, const std
 std::optional<Pose> LoopClosing::loop_match(const SurveyState& state, std::size_t i, std::size_t j, const Pose& start,
                                             std::string& doubt, bool& converged) const {
   const std::size_t model[] = {i};
-  const std::vector<WorldModel> models = state.models_of(model);
+  std::vector<WorldModel> models = state.models_of(model);
+  std::shared_ptr<const PreparedCloud> visit;  // a narrow-field timed sweep's: the sweeps around i, one tree
+  const auto timed = [&](std::size_t k) { return state.prepared(k).sweep_s > 0.0; };
+  if (settings_.loops.visit_sweeps > 0 && timed(i) && timed(j) &&
+      narrow_field(state, j, settings_.motion.sweep_spring_max_field_deg)) {
+    const std::size_t half = static_cast<std::size_t>(settings_.loops.visit_sweeps);
+    const std::size_t gap = static_cast<std::size_t>(settings_.loops.min_scan_gap);
+    std::vector<std::size_t> near;  // i first, then outwards: the local map keeps the first one's point in a cell
+    const auto add = [&](std::size_t k) {
+      if (k < state.size() && k + gap <= j && state.registered(k) && timed(k)) near.push_back(k);
+    };
+    for (std::size_t d = 0; d <= half; ++d) {
+      if (d <= i) add(i - d);
+      if (d > 0) add(i + d);
+    }
+    const float bound_cm = registration_.icp().max_pair_dist_cm;
+    float widest_cm = bound_cm;  // one tree for every bound the match tries: cropped to the widest's reach
+    for (const float factor : settings_.loops.bound_factors) {
+      widest_cm = std::max(widest_cm, std::min(factor * bound_cm, float(settings_.max_retry_bound_cm)));
+    }
+    visit = local_map_.union_of(state, j, near, state.pose(i), start, double(widest_cm) + settings_.metascan_margin_cm,
+                                settings_.motion.local_map_cell_cm);
+    models = {{visit.get(), state.pose(i)}};
+  }
   for (const float factor : settings_.loops.bound_factors) {
     const float bound = factor * registration_.icp().max_pair_dist_cm;
     if (bound > settings_.max_retry_bound_cm) break;

@@ -65,7 +65,10 @@ class LoopClosing {
   Return next_return(const SurveyState& state, const std::vector<Pose>& guess, const std::vector<double>& driven,
                      std::size_t first) const;
   /// Step 2: a trusted match of scan j against scan i alone, from `start` (j's pose in the state's
-  /// frame), at each bound of loops.bound_factors in turn. Empty when none is trusted; `doubt` then
+  /// frame), at each bound of loops.bound_factors in turn. A narrow-field timed sweep is matched
+  /// against i's visit instead: the sweeps within loops.visit_sweeps of i, nearest first, as one
+  /// local map (LocalMap::union_of, thinned as the metascan is) cropped to j's reach at the widest
+  /// bound. Empty when none is trusted; `doubt` then
   /// says why. `converged`: some bound's match converged and was judged doubtful (not: no overlap).
   std::optional<Pose> loop_match(const SurveyState& state, std::size_t i, std::size_t j, const Pose& start,
                                  std::string& doubt, bool& converged) const;

@@ -203,6 +203,7 @@ void LoopClosureSettings::validate() const {
   if (min_scan_gap < 2) throw std::invalid_argument("a loop must join scans at least 2 apart");
   if (judge_max_scans < 0) throw std::invalid_argument("the judging after a loop takes 0 (all) or more scans");
   if (judge_max_visits < 0) throw std::invalid_argument("the judging after a loop takes 0 (all) or more visits");
+  if (visit_sweeps < 0) throw std::invalid_argument("a loop match's visit takes 0 (the one sweep) or more sweeps");
   if (!(max_distance_cm > 0.0) || !std::isfinite(max_distance_cm)) {
     throw std::invalid_argument("the loop candidates' distance must be a finite length > 0 cm");
   }

@@ -330,6 +330,15 @@ struct LoopClosureSettings {
   /// what a loop closed to; a tenth lap is not judged against the nine before it (docs/scaling.md:
   /// 10 laps, 1000 scans). Places passed at most this often are judged against every scan near.
   int judge_max_visits = 3;
+  /// A narrow-field timed sweep's loop match (a rosette scanner's: its points span less azimuth
+  /// than MotionSettings::sweep_spring_max_field_deg, the spring's own test) is made against the
+  /// sweeps within this many of the earlier one, before and after it (its visit), as one tree
+  /// thinned as the local map is, not against that one sweep: one sweep of a forward-looking
+  /// sensor's pattern sees too little of a place, and on three of six simulated hand-held loops
+  /// no loop match found pairs ("too few pairs") where the visit closed each (docs/benchmarks.md,
+  /// "A loop closed against the visit"). 0: the one sweep. A spinning sensor's sweeps see all
+  /// around: theirs stays the one sweep.
+  int visit_sweeps = 6;
   PoseGraphSettings graph;
   void validate() const;
   bool operator==(const LoopClosureSettings&) const = default;

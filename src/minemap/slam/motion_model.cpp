@@ -69,14 +69,19 @@ double azimuth_span_deg(std::span<const Eigen::Vector3f> points, const Pose& fil
 
 }  // namespace
 
+bool narrow_field(const SurveyState& state, std::size_t i, double max_field_deg) {
+  if (!(max_field_deg < 360.0)) return true;
+  const PreparedScan& scan = state.prepared(i);
+  return scan.cloud && azimuth_span_deg(scan.cloud->points(), rigid_inverse(state.points_from_file(i))) < max_field_deg;
+}
+
 float MotionPrediction::start_spring_pairs(const SurveyState& state, std::size_t i) const {
   const MotionSettings& motion = settings_.motion;
   if (!(state.prepared(i).sweep_s > 0.0) || !(motion.sweep_start_spring_pairs > 0.0)) return 0.0f;
   const PredictionError recent = recent_error(state, i);
   if (recent.count < motion.confirm_min_history) return 0.0f;
   if (motion.sweep_spring_max_field_deg < 360.0 && state.prepared(i).cloud &&
-      !(azimuth_span_deg(state.prepared(i).cloud->points(), rigid_inverse(state.points_from_file(i))) <
-        motion.sweep_spring_max_field_deg)) {
+      !narrow_field(state, i, motion.sweep_spring_max_field_deg)) {
     return 0.0f;
   }
   const double ratio = motion.sweep_spring_full_error_cm / std::max(recent.translation_rms_cm, 1e-9);

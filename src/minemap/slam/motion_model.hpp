@@ -121,6 +121,14 @@ class MotionPrediction {
   const MappingSettings& settings_;
 };
 
+/// Whether scan i's prepared points span less azimuth than `max_field_deg` about its sensor (the z
+/// axis of its file's frame; 5 deg bins, each holding at least 1 in 500 of them): a narrow-field
+/// sensor's sweep, a rosette scanner's (~70 deg), not a spinning one's (360). Every scan is narrow
+/// at 360 or more; a scan with no prepared cloud is not. The spring (start_spring_pairs) and the
+/// loop match's visit (LoopClosureSettings::visit_sweeps) ask it with
+/// MotionSettings::sweep_spring_max_field_deg.
+bool narrow_field(const SurveyState& state, std::size_t i, double max_field_deg);
+
 /// A match's pose with its move from the prediction along one direction taken out: T_world_points
 /// `predicted` times the correction predicted -> `matched`, less that correction's translation along
 /// `direction` (unit, in the predicted points' frame; the rest of the translation and the whole
