@@ -264,6 +264,17 @@ struct MovingRun {
   int iterations = 0;  ///< step 1's ICP iterations
 };
 
+/// The same scans with their points stored about another origin, `offset_cm` from the file's (read
+/// relative to a local origin, as a file whose points lie far from its frame's origin): the same
+/// points in the file's frame.
+std::vector<Scan> stored_about(std::vector<Scan> scans, const Eigen::Vector3f& offset_cm) {
+  for (Scan& scan : scans) {
+    for (Eigen::Vector3f& p : scan.points_cm) p -= offset_cm;
+    scan.local_origin_cm += offset_cm.cast<double>();
+  }
+  return scans;
+}
+
 MovingRun map_moving(const sim::MovingSurvey& survey, const MappingSettings& settings) {
   CpuBackend cpu;
   const MappingResult result = map_survey(survey.scans, settings, cpu);
@@ -950,12 +961,7 @@ TEST(MovingMapping, TheStartSpringHoldsNarrowFieldTimedSweepsOnly) {
   // The same sweeps stored about an origin 80 m to the side (read relative to a local origin, as a
   // file whose points lie far from its frame's): about that origin they span a few tens of degrees,
   // about the sensor still 360, and the field is the sensor's. No spring: the same bits as without.
-  std::vector<Scan> aside = drive.scans;
-  const Eigen::Vector3f offset(0.0f, 8000.0f, 0.0f);
-  for (Scan& scan : aside) {
-    for (Eigen::Vector3f& p : scan.points_cm) p -= offset;
-    scan.local_origin_cm += offset.cast<double>();
-  }
+  const std::vector<Scan> aside = stored_about(drive.scans, Eigen::Vector3f(0.0f, 8000.0f, 0.0f));
   const MappingResult aside_held = map_survey(aside, spring, cpu);
   const MappingResult aside_off = map_survey(aside, off, cpu);
   ASSERT_EQ(aside_held.scans.size(), aside_off.scans.size());
@@ -1045,13 +1051,8 @@ TEST(MovingMapping, TheFirstSweepsOwnMotionFittedTurnsTheMapOfALoopStartingInACo
   const bool kept_here = compare(survey.scans, "as simulated");
   // The same sweeps stored about another origin (a file's points far from its frame's origin, read
   // relative to a local one): the fit works in the file's frame, the match in the points' frame.
-  std::vector<Scan> moved = survey.scans;
-  const Eigen::Vector3f offset(360.0f, -240.0f, 55.0f);
-  for (Scan& scan : moved) {
-    for (Eigen::Vector3f& p : scan.points_cm) p -= offset;
-    scan.local_origin_cm += offset.cast<double>();
-  }
-  const bool kept_elsewhere = compare(moved, "stored about another origin");
+  const bool kept_elsewhere =
+      compare(stored_about(survey.scans, Eigen::Vector3f(360.0f, -240.0f, 55.0f)), "stored about another origin");
   EXPECT_TRUE(kept_here || kept_elsewhere);  // the fit is kept in one of them, on every build measured
 }
 

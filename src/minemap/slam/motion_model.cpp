@@ -80,10 +80,8 @@ float MotionPrediction::start_spring_pairs(const SurveyState& state, std::size_t
   if (!(state.prepared(i).sweep_s > 0.0) || !(motion.sweep_start_spring_pairs > 0.0)) return 0.0f;
   const PredictionError recent = recent_error(state, i);
   if (recent.count < motion.confirm_min_history) return 0.0f;
-  if (motion.sweep_spring_max_field_deg < 360.0 && state.prepared(i).cloud &&
-      !narrow_field(state, i, motion.sweep_spring_max_field_deg)) {
-    return 0.0f;
-  }
+  // (A sweep not yet prepared, the deskew's first prediction, is not judged by its field.)
+  if (state.prepared(i).cloud && !narrow_field(state, i, motion.sweep_spring_max_field_deg)) return 0.0f;
   const double ratio = motion.sweep_spring_full_error_cm / std::max(recent.translation_rms_cm, 1e-9);
   return static_cast<float>(motion.sweep_start_spring_pairs * std::min(1.0, ratio * ratio));
 }
