@@ -45,11 +45,12 @@
 # run through the CLI; ASan runs it), and two more that ASan runs whose threads TSan sees in smaller
 # tests (2026-12-05, 30 s each under TSan): ControlTie.RefusesTooFew... (a 63-scan mapping, then
 # single-threaded refusals) and Cli.AWideBoundOfTheUsersOwn... (the Jinchuan pair mapped twice; once
-# in MappingBackends.RealMineScansGiveTheSamePosesOnBothBackends), and six moving-sensor mappings
+# in MappingBackends.RealMineScansGiveTheSamePosesOnBothBackends), and seven moving-sensor mappings
 # whose own code is single-threaded host logic over the matches (2026-12-08: 22-55 s each under
 # TSan, 226 s of its 634; ASan still runs them): MovingMapping.ASecondMatchFromThePrediction...,
 # TheFirstSweepsOwnMotionFitted..., AFirstSweepWhoseOwnMotionIsNotFitted..., ARosetteTurned...,
-# TheStartSpringHolds... and AMovingSensorsMatchesMay...; their parallel parts (deskew, local map,
+# TheStartSpringHolds..., AMovingSensorsMatchesMay... and ASpinningSensorsLocalMapServes... (a kept
+# metascan: MovingCli.MapReadsTheSweeps... keeps them under TSan too); their parallel parts (deskew, local map,
 # search, sums, the sweep fit) run under TSan in MovingCli.*, MovingMapping.Keyframes*,
 # MovingMapping.TheFirstSweepMatchedAgainst... and SweepFit.*. Under both:
 # GlobalRegistration.FindsEachKittiStep... (47 s under ASan, 36 s under TSan: four KITTI steps; the
@@ -101,7 +102,7 @@ timeout="${SANITIZE_TIMEOUT:-900}"
 supp="$repo_root/tests/sanitizers"
 heavy='^(MappingSimulatedMine\.SimultaneousMatchingIsAccurateAndBeatsPairwise|MappingSimulatedMine\.TheBoundedRelaxationIsAsAccurateAsThePapersQueue|HealthRealData\.CarScansSevenMetresApartFromTheIdentityAreDoubtfulAtAnyBoundOrRight|MappingLoops\.ALoopSurveyIsClosedAndItsEndsAgree|MappingLoops\.APatrolsLapsAreTiedTogetherEveryHundredMetres|MappingLoops\.AMovingSensorsLoopThatIsOffIsDoubtfulClosedOrNot|MappingLoops\.ANarrowFieldSweepsLoopIsClosedAgainstTheVisitItReturnsTo|MovingMapping\.SpinningAtTenMetresPerSecondWithoutOdometry|MovingMapping\.TheDeskewKeepsAWeavingSensorsMapFiveTimesCloser|MovingMapping\.AJumpFromThePredictionIsTrustedOnlyWhenASecondStartAgrees|LiveMapper\..*|Recovery\..*|Cli\.ScansOutOfReachAreRecoveredOrConfirmedAndSaySo|Cli\.UnmarkedUosFilesGetTheirSlicesFromTheScannerOrder|install_and_find_package|GlobalRegistration\.FindsEachKittiStepWithoutAStartAndTheSameTwice|ControlTie\.AStraightDriveTiedToItsStationsLandsInTheGrid|ControlTie\.ABlunderIsNamedAndLeftOut|ControlTie\.TargetsOnTheRibsTieTheMapToo)$'
 # TSan only: runs of the single-threaded parsers through the CLI (ASan checks them).
-heavy_thread='^(BadInput\.MapCommandGivesEachCaseItsExitCodeAndLeavesTheOutputFolder|ControlTie\.RefusesTooFewPointsOrPointsInALine|Cli\.AWideBoundOfTheUsersOwnIsRetriedAsTheDefaultIs|MovingMapping\.(ASecondMatchFromThePredictionThatFitsNoCloserChangesNothing|TheFirstSweepsOwnMotionFittedTurnsTheMapOfALoopStartingInACornerRight|AFirstSweepWhoseOwnMotionIsNotFittedAndThatTurnedFastIsDoubtful|ARosetteTurnedByItsPatternIsNamedAndItsTurnTakenOut|TheStartSpringHoldsNarrowFieldTimedSweepsOnly|AMovingSensorsMatchesMayMinimiseTheDistancesToItsPlanesAndStopAndGoKeepsThePapers))$'
+heavy_thread='^(BadInput\.MapCommandGivesEachCaseItsExitCodeAndLeavesTheOutputFolder|ControlTie\.RefusesTooFewPointsOrPointsInALine|Cli\.AWideBoundOfTheUsersOwnIsRetriedAsTheDefaultIs|MovingMapping\.(ASecondMatchFromThePredictionThatFitsNoCloserChangesNothing|TheFirstSweepsOwnMotionFittedTurnsTheMapOfALoopStartingInACornerRight|AFirstSweepWhoseOwnMotionIsNotFittedAndThatTurnedFastIsDoubtful|ARosetteTurnedByItsPatternIsNamedAndItsTurnTakenOut|TheStartSpringHoldsNarrowFieldTimedSweepsOnly|AMovingSensorsMatchesMayMinimiseTheDistancesToItsPlanesAndStopAndGoKeepsThePapers|ASpinningSensorsLocalMapServesTheSweepAfterIt))$'
 
 # Builds oneTBB with -fsanitize=thread into $1/install once; prints its TBB_DIR.
 tsan_tbb() {

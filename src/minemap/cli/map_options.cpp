@@ -239,6 +239,9 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
   number(g, "--local-map-cell-cm", mapping.motion.local_map_cell_cm,
          "A moving sensor's scans (timed sweeps, or scans without odometry): the metascan keeps one point per cell of "
          "this size, the nearest scan's (0 = all)");
+  number(g, "--local-map-sweeps", mapping.motion.local_map_sweeps,
+         "A spinning sensor's timed sweeps: one metascan serves up to this many sweeps in a row, grown by their "
+         "expected move (1 = one for every sweep)");
   number(g, "--provisional-step-factor", mapping.motion.provisional_step_factor,
          "A sweep's first match, before its deskew is refined, converges at this many times --min-step-cm/-deg "
          "(1 = as any match)");

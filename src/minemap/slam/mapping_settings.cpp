@@ -144,6 +144,7 @@ void MotionSettings::validate() const {
   if (!(local_map_cell_cm >= 0.0) || !std::isfinite(local_map_cell_cm)) {
     throw std::invalid_argument("the local map's cell must be a finite length >= 0 cm");
   }
+  if (local_map_sweeps < 1) throw std::invalid_argument("a local map serves at least 1 sweep");
   if (!(provisional_step_factor >= 1.0) || !std::isfinite(provisional_step_factor)) {
     throw std::invalid_argument("the provisional match's step factor must be finite and >= 1");
   }

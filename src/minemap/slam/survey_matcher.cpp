@@ -166,21 +166,44 @@ ScanMatch SurveyMatcher::match_incremental(std::size_t i, const Pose& start, flo
   const Pose frame = state_.pose(i - 1);
   const PreparedScan& scan = state_.prepared(i);
   const double thin_cm = motion_.local_map_cell_cm(state_, i);
+  const PreparedCloud& own = *scan.cloud;
+  const double radius_cm = std::max(own.bounds_min().norm(), own.bounds_max().norm());
+  // How far the scan's box moves between two poses: the sensor's move and its turn at the box's edge.
+  const auto box_shift_cm = [&](const Pose& from, const Pose& to) {
+    const Pose moved = rigid_inverse(from) * to;
+    return translation_norm(moved) + rotation_angle_deg(moved) * (M_PI / 180.0) * radius_cm;
+  };
+  // A wide-field timed sweep's metascan serves the sweeps after it too (MotionSettings::
+  // local_map_sweeps), grown by how far their boxes are expected to move: the last step's shift,
+  // once more for each. A narrow field's newest sweep is the only one that saw what lies ahead.
+  const MotionSettings& motion = settings_.motion;
+  const int serves = thin_cm > 0.0 && scan.sweep_s > 0.0 && motion.local_map_sweeps > 1 &&
+                             !narrow_field(state_, i, motion.sweep_spring_max_field_deg)
+                         ? motion.local_map_sweeps
+                         : 1;
+  const double ahead_cm = serves > 1 && i >= 2 ? kLocalMapShiftAllowance * double(serves - 1) *
+                                                     box_shift_cm(state_.pose(i - 2), state_.pose(i - 1))
+                                               : 0.0;
   std::vector<std::shared_ptr<const PreparedCloud>> metascans;
   return registration_.register_scan(scan, start, [&](float bound_cm, const Pose& standing) {
     LastMetascan& last = last_metascan_;
-    const bool same_match = last.cloud && last.scan == i && last.bound_cm == bound_cm && last.frame == frame;
-    if (thin_cm > 0.0 && same_match && standing == start) {
-      const PreparedCloud& own = *scan.cloud;
-      const double radius_cm = std::max(own.bounds_min().norm(), own.bounds_max().norm());
-      const Pose moved = rigid_inverse(last.at) * start;
-      const double shift_cm = translation_norm(moved) + rotation_angle_deg(moved) * (M_PI / 180.0) * radius_cm;
-      if (shift_cm < 0.5 * settings_.metascan_margin_cm) return std::vector<WorldModel>{{last.cloud.get(), frame}};
+    // A metascan serving several sweeps serves any bound up to its own (its crop holds theirs).
+    const bool bound_served = serves > 1 ? last.bound_cm >= bound_cm : last.bound_cm == bound_cm;
+    const bool same_match = last.cloud && last.scan == i && bound_served && last.frame == frame;
+    const bool kept_from_before = last.cloud && last.scan < i && last.scan + std::size_t(serves) > i &&
+                                  bound_served && last.older_moves == state_.older_moves();
+    if (thin_cm > 0.0 && (same_match || kept_from_before) && standing == start) {
+      // Half the margin is left for the match's correction; the rest, and the growth ahead, for the move.
+      if (box_shift_cm(last.at, start) < 0.5 * settings_.metascan_margin_cm + last.ahead_cm) {
+        return std::vector<WorldModel>{{last.cloud.get(), last.frame}};
+      }
     }
-    const double grow_cm = double(bound_cm) + settings_.metascan_margin_cm;
+    const double grow_cm = double(bound_cm) + settings_.metascan_margin_cm + (standing == start ? ahead_cm : 0.0);
     metascans.push_back(
         local_map_.metascan(state_, i, standing, frame, start, grow_cm, thin_cm));
-    if (thin_cm > 0.0 && standing == start) last = {i, bound_cm, frame, start, metascans.back()};
+    if (thin_cm > 0.0 && standing == start) {
+      last = {i, bound_cm, frame, start, metascans.back(), ahead_cm, state_.older_moves()};
+    }
     return std::vector<WorldModel>{{metascans.back().get(), frame}};
   }, start_bound_cm, convergence, objectives);
 }
@@ -236,7 +259,7 @@ void SurveyMatcher::match_scan(std::size_t i, const Scan* raw, const SweepTiming
       relax(i, per_scan > 0 ? per_scan : 4 * static_cast<int>(i + 1));
     });
   }
-  last_metascan_ = {};
+  if (settings_.motion.local_map_sweeps <= 1) last_metascan_ = {};  // else kept for the sweeps after it
   features_start_.reset();
   features_said_ = false;
   state_.set_match_cost(i, arrived.seconds(), resident_bytes());

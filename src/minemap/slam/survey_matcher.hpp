@@ -210,7 +210,11 @@ class SurveyMatcher {
     float bound_cm = 0.0f;
     Pose frame = Pose::Identity(), at = Pose::Identity();
     std::shared_ptr<const PreparedCloud> cloud;
+    double ahead_cm = 0.0;  ///< grown by this for the sweeps after scan (MotionSettings::local_map_sweeps)
+    std::uint64_t older_moves = 0;  ///< SurveyState::older_moves when built: its scans as they stood
   };
+  /// A metascan kept for the sweeps after its own is grown by this many times their expected shift.
+  static constexpr double kLocalMapShiftAllowance = 1.5;
   mutable LastMetascan last_metascan_;
   /// features_start's answer for the scan being matched (dropped when it is done).
   std::optional<std::pair<std::size_t, RecoveredStart>> features_start_;

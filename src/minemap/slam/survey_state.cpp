@@ -152,6 +152,7 @@ void SurveyState::place(std::size_t i, const Pose& world_from_points, const IcpR
 }
 
 void SurveyState::place(std::size_t i, const Pose& world_from_points) {
+  count_move(i);
   ScanOutcome& outcome = scans_[i].outcome;
   outcome.world_from_points = world_from_points;
   outcome.pose_cm = world_from_points * scans_[i].points_from_file;
@@ -159,6 +160,7 @@ void SurveyState::place(std::size_t i, const Pose& world_from_points) {
 }
 
 void SurveyState::fail(std::size_t i, const Pose& start, const IcpResult& match) {
+  count_move(i);
   ScanOutcome& outcome = scans_[i].outcome;
   outcome.world_from_points = start;
   outcome.pose_cm = start * scans_[i].points_from_file;
@@ -169,6 +171,7 @@ void SurveyState::fail(std::size_t i, const Pose& start, const IcpResult& match)
 }
 
 void SurveyState::restore(std::size_t i, const ScanOutcome& saved) {
+  count_move(i);
   ScanOutcome& outcome = scans_[i].outcome;
   ScanOutcome restored = saved;
   restored.points_in = outcome.points_in;

@@ -88,6 +88,9 @@ class SurveyState {
   /// A resumed run: scan i as an earlier run left it (its clouds, counts and points stay its own).
   void restore(std::size_t i, const ScanOutcome& saved);
   void judged(std::size_t i, RegistrationHealth health) { scans_[i].outcome.health = std::move(health); }
+  /// How many times a scan other than the newest has moved (place, fail, restore): a metascan built
+  /// from the scans before the newest stays theirs while this does not change.
+  std::uint64_t older_moves() const { return older_moves_; }
   void count_relaxation_match(std::size_t i) { ++scans_[i].outcome.relaxation_matches; }
   /// What scan i's arrival cost: seconds, and the process's resident memory after it (bytes).
   void set_match_cost(std::size_t i, double seconds, std::size_t resident_bytes) {
@@ -106,6 +109,9 @@ class SurveyState {
   std::vector<ScanOutcome> outcomes() const;
 
  private:
+  /// Counts a move of scan i where it is not the newest (older_moves).
+  void count_move(std::size_t i) { older_moves_ += i + 1 < scans_.size() ? 1 : 0; }
+  std::uint64_t older_moves_ = 0;
   struct ScanState {
     mutable PreparedScan prepared;  ///< its heavy parts null while let go of (prepared() reads them back)
     Pose odometry = Pose::Identity();          ///< initial T_world_points
