@@ -138,6 +138,7 @@ TEST(CommandLine, EveryMappingOptionChangesTheSettings) {
       else if (option.name == "--search") args.push_back("kd");
       else if (option.name == "--deskew") args.push_back("off");
       else if (option.name == "--motion-model") args.push_back("constant-velocity");
+      else if (option.name == "--refine-search") args.push_back("exact");
       else args.push_back(perturbed(d.front() == '[' ? d.substr(1) : d));
     }
     SCOPED_TRACE(args.back());

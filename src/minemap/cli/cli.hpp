@@ -64,7 +64,6 @@ struct MapOptions {
   bool no_first_sweep_fit = false;
   bool provisional_all_points = false;
   bool wide_coarse_all_points = false;
-  bool refine_exact_search = false;
   bool moving_point_to_plane = false;
   bool no_loops = false;
   int threads = 0;            ///< worker threads (0: all cores)

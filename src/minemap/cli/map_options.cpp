@@ -257,10 +257,10 @@ void MapOptionTable::declare_matching(MapOptions& map, MappingSettings& mapping)
   flag(g, "--wide-coarse-all-points", map.wide_coarse_all_points,
        "The first match at the adaptive bound runs its coarse stage on all the scan's points (the default: the "
        "health probe's; the fine stage matches all of them)");
-  flag(g, "--refine-exact-search", map.refine_exact_search,
-       "A sweep's match after its deskew's refinement searches exactly from its first iteration, as it starts where the "
-       "sweep's first match converged (the default: the paper's schedule, the approximate kd-tree first); 0.94-0.96x "
-       "the time on the simulated drives");
+  choice(g, "--refine-search", mapping.motion.refine_search, kRefineSearchNames, parse_refine_search,
+         "Which timed sweeps' matches after their deskew's refinement, starting where their first match converged, "
+         "search exactly from the first iteration, without the paper's approximate phase: papers (none), wide-exact (a "
+         "spinning sensor's, not a narrow field's), exact (every sweep's); 0.93-0.96x the time on the simulated drives");
 }
 
 void MapOptionTable::declare_relaxation(MappingSettings& mapping) {
@@ -375,7 +375,6 @@ void finish_settings(MapCommand& command) {
   if (options.no_first_sweep_fit) settings.motion.first_sweep_fit = false;
   if (options.provisional_all_points) settings.motion.provisional_probe = false;
   if (options.wide_coarse_all_points) settings.motion.wide_coarse_probe = false;
-  if (options.refine_exact_search) settings.motion.refine_exact_search = true;
   if (options.moving_point_to_plane) settings.motion.plane_objective = true;
   if (options.no_loops) settings.loops.enabled = false;
   if (options.loop_edges_alike) settings.loops.information_from_geometry = false;

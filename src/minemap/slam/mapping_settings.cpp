@@ -8,6 +8,10 @@ namespace minemap {
 
 const char* to_string(MatchingMode mode) { return name_in(kMatchingModeNames, mode); }
 MatchingMode parse_matching_mode(const std::string& text) { return parse_named(kMatchingModeNames, text, "mode"); }
+const char* to_string(RefineSearch search) { return name_in(kRefineSearchNames, search); }
+RefineSearch parse_refine_search(const std::string& text) {
+  return parse_named(kRefineSearchNames, text, "refinement's search");
+}
 const char* to_string(Reduction reduction) { return name_in(kReductionNames, reduction); }
 Reduction parse_reduction(const std::string& text) { return parse_named(kReductionNames, text, "reduction"); }
 const char* to_string(Preset preset) { return name_in(kPresetNames, preset); }

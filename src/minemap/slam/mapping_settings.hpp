@@ -29,6 +29,18 @@ inline constexpr std::array<EnumName<MatchingMode>, 3> kMatchingModeNames{
 const char* to_string(MatchingMode mode);
 MatchingMode parse_matching_mode(const std::string& text);  ///< a name of kMatchingModeNames
 
+/// Which timed sweeps' refinements (the match after the deskew, from where the sweep's first match
+/// converged) search exactly from their first iteration, without the paper's approximate phase.
+enum class RefineSearch {
+  kPapers,     ///< none: every refinement keeps the paper's schedule, approximate first
+  kWideExact,  ///< a wide field's (a spinning sensor's: not narrow_field); a narrow field's the paper's
+  kExact,      ///< every sweep's
+};
+inline constexpr std::array<EnumName<RefineSearch>, 3> kRefineSearchNames{
+    {{RefineSearch::kPapers, "papers"}, {RefineSearch::kWideExact, "wide-exact"}, {RefineSearch::kExact, "exact"}}};
+const char* to_string(RefineSearch search);
+RefineSearch parse_refine_search(const std::string& text);  ///< a name of kRefineSearchNames
+
 /// How each scan is reduced before matching.
 enum class Reduction {
   kSlices,  ///< the paper's slice filter (median, 10 cm along each slice, every third slice)
@@ -107,16 +119,17 @@ struct MotionSettings {
   /// Whether a sweep's first match is provisional (by either setting above): then its refinement
   /// always matches again, to ICP's least step, with all points.
   bool provisional() const { return provisional_step_factor > 1.0 || provisional_probe; }
-  /// true: the refinement's match (a sweep matched again after its deskew, from where its first
-  /// match ended) searches exactly from its first iteration, without the paper's approximate phase.
-  /// That phase is for a start far from the answer; from a converged one it leads away (the
-  /// approximate kd-tree pairs with its buckets' means, whose minimum is not the points') and the
-  /// exact phase walks back: on the simulated spinning drive the refinement spent 4.4 approximate
-  /// and 10.0 exact iterations, and 7.0 exact ones with this on, for 0.94-0.96x the wall time. Not
-  /// the default: the chaotic hand-held loops move both ways with it, two of six to 1.06 / 1.08 %
-  /// of their paths (docs/benchmarks.md, "The refinement's exact search"). Only with
-  /// SearchMethod::kApproximate (the others are already exact).
-  bool refine_exact_search = false;
+  /// Which sweeps' refinements search exactly from their first iteration (RefineSearch). The
+  /// paper's approximate phase is for a start far from the answer; from a converged one it leads
+  /// away (the approximate kd-tree pairs with its buckets' means, whose minimum is not the
+  /// points') and the exact phase walks back: on the simulated spinning drive the refinement spent
+  /// 4.4 approximate and 10.0 exact iterations, and 7.0 exact ones searching exactly, for 0.93-0.96x
+  /// the wall time, the drives as accurate. Not the default: the chaotic loops move both ways with
+  /// it, two of six hand-held loops past 1 % of their paths, and one of six spinning loops lost its
+  /// track (named, exit 13) where the paper's schedule stayed within 1.1 % (docs/benchmarks.md,
+  /// "The refinement's exact search", "A spinning sensor's local map kept for the sweep after it").
+  /// Only with SearchMethod::kApproximate (the others are already exact).
+  RefineSearch refine_search = RefineSearch::kPapers;
   /// The first match at the adaptive bound (wider than the pair bound) runs its coarse stage, at
   /// that bound, on the health probe's points alone: it only has to bring the scan within the pair
   /// bound's reach, and the fine stage after it matches every point. On real hand-held keyframes

@@ -70,7 +70,7 @@ struct MatchObjectives {
   float start_spring_pairs = 0.0f;
   /// The match at the pair bound searches exactly from its first iteration (SearchMethod::kExact
   /// where the settings say kApproximate): a start where a match of the same scan converged (the
-  /// deskew's refinement, MotionSettings::refine_exact_search). Wide matches and retries keep the
+  /// deskew's refinement, MotionSettings::refine_search). Wide matches and retries keep the
   /// settings' schedule.
   bool exact_from_start = false;
 };

@@ -40,7 +40,11 @@ void SurveyMatcher::refine_deskew(std::size_t i, const Scan& raw, const SweepTim
   Prediction here;
   here.objectives.fine = motion_.fine_objective(state_, i);
   here.objectives.start_spring_pairs = motion_.start_spring_pairs(state_, i);  // held where the first match put it
-  here.objectives.exact_from_start = settings_.motion.refine_exact_search;  // it starts converged (not by default)
+  // It starts converged: a spinning sensor's refinement searches exactly (MotionSettings::refine_search).
+  const RefineSearch search = settings_.motion.refine_search;
+  here.objectives.exact_from_start =
+      search == RefineSearch::kExact ||
+      (search == RefineSearch::kWideExact && !narrow_field(state_, i, settings_.motion.sweep_spring_max_field_deg));
   here.start = state_.pose(i);
   here.start_bound_cm = settings_.pairwise_icp().max_pair_dist_cm;
   ScanMatch again = match_from(i, here);
