@@ -204,7 +204,8 @@ class SurveyMatcher {
   /// The metascan scan i's last incremental match took, at one bound: a sweep's second match
   /// (refine_deskew), from a pose a few centimetres from the first's start, takes the same one when
   /// the scan's box moved less than half the metascan's margin (metascan_margin_cm), instead of a
-  /// new tree. Dropped when the scan is done.
+  /// new tree. A wide-field sweep's serves the sweep after it too (MotionSettings::local_map_sweeps:
+  /// grown by ahead_cm, kept while none of its scans moved); otherwise dropped when the scan is done.
   struct LastMetascan {
     std::size_t scan = 0;
     float bound_cm = 0.0f;
