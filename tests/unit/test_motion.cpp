@@ -1106,12 +1106,17 @@ sim::MovingSimulationSettings corner_loop_start() {
 // (it did not converge, or the match from it was not trusted), the run is the step's, bit for bit,
 // and a note says so. Which of the two a build gets depends on last bits in this chaotic corner:
 // clang's builds (the sanitizer runs) do not converge here (docs/benchmarks.md), the same sweeps
-// stored about another origin converge there.
+// stored about another origin converge there. The sweeps after it take one metascan each
+// (local_map_sweeps 1), as when these figures were measured: the chain 1-20 through the corner is
+// chaotic too, and with the spinning sensor's kept local map (the default since 2026-12-08) the
+// fit is kept in both builds and sweep 20 ends 2.1 deg off in GCC's Release build, 3.0 in clang's
+// ASan build (the step's 3.3 and 4.8), which is the local map's chaos, not the fit's.
 TEST(MovingMapping, TheFirstSweepsOwnMotionFittedTurnsTheMapOfALoopStartingInACornerRight) {
   sim::MovingSimulationSettings simulation = corner_loop_start();
   const sim::MovingSurvey survey = sim::simulate_moving_survey(simulation);
   CpuBackend cpu;
-  const MappingSettings defaults;
+  MappingSettings defaults;
+  defaults.motion.local_map_sweeps = 1;
   ASSERT_TRUE(defaults.motion.first_sweep_fit);
   MappingSettings off = defaults;
   off.motion.first_sweep_fit = false;
