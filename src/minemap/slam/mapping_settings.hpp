@@ -170,10 +170,11 @@ struct MotionSettings {
   /// while their boxes stay within its margin and no scan in it has moved: it is built grown by the
   /// move the last step predicts for them, and it serves their first matches and refinements at any
   /// bound up to its own. The sweeps after it match without the newest sweeps, which a spinning
-  /// sensor's map hardly misses: on the simulated spinning drives and loops 0.75-0.85x the wall
-  /// time at the same mean error (the step error up to 1.1x). A narrow field's newest sweep is the
-  /// only one that saw what lies ahead: hand-held sweeps and keyframes take one metascan each (the
-  /// hand-held loops drifted further without it). 1: one for every sweep, as the paper's
+  /// sensor's map hardly misses: on the simulated spinning drives 0.85-0.88x the wall time at the
+  /// same mean error (the step error up to 1.1x; a loop's time is its loop closing's, 1.01x). A
+  /// narrow field's newest sweep is the only one that saw what lies ahead: hand-held sweeps and
+  /// keyframes take one metascan each (the hand-held loops drifted further without it). 1: one for
+  /// every sweep, as the paper's
   /// (docs/benchmarks.md, "A spinning sensor's local map kept for the sweep after it").
   int local_map_sweeps = 2;
   /// A match that needed a retry and moved the scan's points more than this many times the RMS of
