@@ -174,8 +174,8 @@ struct MotionSettings {
   /// same mean error (the step error up to 1.1x; a loop's time is its loop closing's, 1.01x). A
   /// narrow field's newest sweep is the only one that saw what lies ahead: hand-held sweeps and
   /// keyframes take one metascan each (the hand-held loops drifted further without it). 1: one for
-  /// every sweep, as the paper's
-  /// (docs/benchmarks.md, "A spinning sensor's local map kept for the sweep after it").
+  /// every sweep, as the paper's (docs/benchmarks.md, "A spinning sensor's local map kept for the
+  /// sweep after it").
   int local_map_sweeps = 2;
   /// A match that needed a retry and moved the scan's points more than this many times the RMS of
   /// the recent prediction errors (with at least confirm_min_history of them) is not trusted on its
